@@ -1,0 +1,53 @@
+// How one facet meets one plane: the degenerate cases, settled once.
+//
+// On-plane rule (DESIGN.md, symbolic perturbation): a vertex with z >= plane counts as ABOVE the plane.
+// So a facet crosses plane z exactly when zmin < z <= zmax, every crossed facet has exactly one edge
+// traversed from above to below (its "down" edge) and one from below to above (its "up" edge), and no
+// epsilon or special case is needed for vertices, edges or whole facets lying in the plane.
+//
+// Edge numbering follows the adjacency table: edge j of a facet is the edge opposite corner j, running
+// corner j+1 -> corner j+2 in the facet's counter-clockwise order.
+//
+// Orientation: for an outward-facing facet, the segment that keeps material on its left (so outer loops
+// are counter-clockwise seen from +z) runs from the crossing on the down edge to the crossing on the up
+// edge. Marching therefore leaves a facet through its up edge, and enters the neighbour through the
+// neighbour's down edge (the same geometric edge, traversed the other way).
+//
+// Crossing point: computed from the edge's below end `a` and above end `b` as a + t (b - a),
+// t = (z - a.z) / (b.z - a.z), in double. Both facets sharing an edge see the same (a, b), so every path
+// computes bit-identical points.
+#pragma once
+
+#include <cstdint>
+
+#include "core/contours.h"
+#include "core/mesh.h"
+
+namespace toposlice {
+
+// Bit i set when corner i is above (or on) the plane. Codes 1..6 cross the plane; 0 and 7 do not.
+inline unsigned aboveMask(const Point3f* corners, double z) {
+  return (static_cast<double>(corners[0].z) >= z ? 1u : 0u) | (static_cast<double>(corners[1].z) >= z ? 2u : 0u) |
+         (static_cast<double>(corners[2].z) >= z ? 4u : 0u);
+}
+
+inline bool crossesPlane(unsigned mask) { return mask != 0 && mask != 7; }
+
+// Down edge (above -> below) and up edge (below -> above) for each crossing mask; index 0 and 7 unused.
+inline constexpr uint8_t kDownEdge[8] = {0, 2, 0, 0, 1, 2, 1, 0};
+inline constexpr uint8_t kUpEdge[8] = {0, 1, 2, 1, 0, 0, 2, 0};
+
+// Crossing of edge `edge` (opposite corner `edge`) of a crossed facet with plane z. Works for either
+// direction of traversal: the below end is always the base of the interpolation.
+inline Point2d edgeCrossing(const Point3f* corners, unsigned edge, double z) {
+  const Point3f& p = corners[edge == 2 ? 0 : edge + 1];
+  const Point3f& q = corners[edge == 0 ? 2 : edge - 1];
+  const bool pBelow = static_cast<double>(p.z) < z;
+  const Point3f& a = pBelow ? p : q;
+  const Point3f& b = pBelow ? q : p;
+  const double az = a.z;
+  const double t = (z - az) / (static_cast<double>(b.z) - az);
+  return {a.x + t * (static_cast<double>(b.x) - a.x), a.y + t * (static_cast<double>(b.y) - a.y)};
+}
+
+}  // namespace toposlice

@@ -1,0 +1,28 @@
+// Slicing planes (DESIGN.md): layer k is cut at z_k = z0 + (k + 1/2) h, z0 defaults to the model's
+// lowest z, and the layer count defaults to ceil((zmax - z0) / h). An explicit ascending list of z values
+// may be given instead.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace toposlice {
+
+struct PlaneSpec {
+  std::optional<double> layerHeight;  // h in mm
+  std::optional<uint32_t> layers;     // layer count; with no height, h = (zmax - z0) / layers
+  std::optional<double> z0;           // bottom of layer 0; default: the model's lowest z
+  std::vector<double> explicitZ;      // when not empty, these planes are used as given
+};
+
+// Returns the planes for a model spanning [zmin, zmax], or an error message in `error` (and an empty
+// vector) when the specification cannot make planes (non-positive height, no layers, unsorted list...).
+std::vector<double> makePlanes(const PlaneSpec& spec, double zmin, double zmax, std::string& error);
+
+// Parses "0.1,0.2,0.35" (commas or whitespace) into values; returns false on malformed text.
+bool parseZList(const std::string& text, std::vector<double>& out);
+
+}  // namespace toposlice
