@@ -1,0 +1,26 @@
+// One layer's mask image, as produced by the rasterizer and consumed by the mask writers.
+//
+// Pixel (i, j) covers [x0 + i p, x0 + (i+1) p) x [y0 + j p, y0 + (j+1) p) in model millimetres
+// (DESIGN.md). Rows are stored bottom-up: row j is the j-th row from the lowest y, so pixels[j * width + i]
+// is pixel (i, j). Writers of top-down formats (PNG, EXR) emit row height-1 first. Values are 0 (dark)
+// to 255 (fully lit); a binary mask holds only 0 and 255.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+namespace toposlice {
+
+struct PixelGrid {
+  double x0 = 0, y0 = 0;  // lower-left corner of pixel (0, 0), mm
+  double pixel = 0.05;    // pixel edge length, mm
+  uint32_t width = 0, height = 0;
+  bool mirrorX = false, mirrorY = false;  // applied by the rasterizer: pixel i becomes width-1-i, etc.
+};
+
+struct MaskImage {
+  uint32_t width = 0, height = 0;
+  std::vector<uint8_t> pixels;  // width * height, row j = j-th row from the lowest y
+};
+
+}  // namespace toposlice
