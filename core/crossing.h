@@ -51,3 +51,25 @@ inline Point2d edgeCrossing(const Point3f* corners, unsigned edge, double z) {
 }
 
 }  // namespace toposlice
+
+namespace toposlice {
+
+inline double squaredDistance(Point2d a, Point2d b) {
+  const double dx = a.x - b.x, dy = a.y - b.y;
+  return dx * dx + dy * dy;
+}
+
+inline double squaredDistance(const Point3f& a, const Point3f& b) {
+  const double dx = double{a.x} - b.x, dy = double{a.y} - b.y, dz = double{a.z} - b.z;
+  return dx * dx + dy * dy + dz * dz;
+}
+
+// True when edge `ea` of facet a and edge `eb` of facet b join the same two corner positions in opposite
+// directions (each pair within sqrt(tolerance2)): the test that two facets really are neighbours across
+// those edges, used where adjacency is discovered from geometry (sr-lazy, closest point).
+inline bool sharesEdge(const Point3f* a, unsigned ea, const Point3f* b, unsigned eb, double tolerance2) {
+  const unsigned a1 = (ea + 1) % 3, a2 = (ea + 2) % 3, b1 = (eb + 1) % 3, b2 = (eb + 2) % 3;
+  return squaredDistance(a[a1], b[b2]) <= tolerance2 && squaredDistance(a[a2], b[b1]) <= tolerance2;
+}
+
+}  // namespace toposlice

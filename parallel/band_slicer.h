@@ -1,0 +1,47 @@
+// Slicing a whole model: the layer range is cut into bands, bands are sliced in parallel (each with its
+// own scratch, writing only its own slot's layer buffers) and handed to the consumer strictly in layer
+// order through a bounded pipeline, so output is streamed, memory does not grow with the layer count,
+// and the bytes are the same for any thread count and band size.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+
+#include "core/contours.h"
+#include "core/mesh.h"
+#include "core/progress.h"
+#include "core/slice_lazy.h"
+
+namespace toposlice {
+
+enum class SliceMethod { ClosestPoint, SelfReuseLazy, SelfReuse };
+
+// "cp", "sr-lazy", "sr" <-> SliceMethod; parse returns false on an unknown name.
+bool parseSliceMethod(const std::string& name, SliceMethod& method);
+const char* sliceMethodName(SliceMethod method);
+
+struct SliceSettings {
+  SliceMethod method = SliceMethod::SelfReuse;
+  uint32_t bandLayers = 0;       // layers per band; 0 picks a size from the layer and thread counts
+  double joinTolerance = 1e-5;   // mm; cp and sr-lazy join segment ends closer than this
+};
+
+struct SliceStats {
+  uint64_t layers = 0, segments = 0, loops = 0, openPolylines = 0;
+  LazyStats lazy;
+  bool cancelled = false;
+};
+
+using LayerConsumer = std::function<void(uint32_t layer, const LayerContours& contours)>;
+
+// Slices `corners` (3 per facet) at `planes` (ascending). `adjacency` (3 per facet): for SelfReuse a
+// complete table (built or loaded from a template), read only; for SelfReuseLazy the table to start
+// from (all -1, or a template's), updated in place; unused for ClosestPoint. `consume` is called once per
+// layer, in layer order, from one thread at a time. Progress counts layers.
+SliceStats sliceModel(std::span<const Point3f> corners, std::span<int32_t> adjacency, std::span<const double> planes,
+                      const SliceSettings& settings, const LayerConsumer& consume,
+                      const ProgressContext* progress = nullptr);
+
+}  // namespace toposlice

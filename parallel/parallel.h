@@ -1,0 +1,38 @@
+// The thin parallel layer: the only place the rest of toposlice reaches oneTBB through. core/ stays
+// serial; callers express parallel work as a for-each over an index range or an ordered pipeline.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+
+namespace toposlice {
+
+// Limits the worker threads for the lifetime of the object (0 = all cores). One per process run.
+class ThreadLimit {
+ public:
+  explicit ThreadLimit(unsigned threads);
+  ~ThreadLimit();
+  ThreadLimit(const ThreadLimit&) = delete;
+  ThreadLimit& operator=(const ThreadLimit&) = delete;
+  static unsigned available();  // threads the current limit allows
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Calls body(begin, end) on disjoint chunks covering [0, count), in parallel; chunks hold about
+// `grain` indices. The body must write only slots it owns.
+void parallelForChunks(std::size_t count, std::size_t grain,
+                       const std::function<void(std::size_t, std::size_t)>& body);
+
+// An ordered bounded pipeline over tasks 0..count-1: work(i, slot) runs in parallel on at most
+// `inFlight` tasks at once, each given a slot index in [0, inFlight) that no other running task holds
+// (for per-slot buffers); then consume(i, slot) runs serially, in ascending i. Memory stays bounded by
+// the slots whatever the task count.
+void orderedPipeline(std::size_t count, std::size_t inFlight, const std::function<void(std::size_t, std::size_t)>& work,
+                     const std::function<void(std::size_t, std::size_t)>& consume);
+
+}  // namespace toposlice
