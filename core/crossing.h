@@ -18,7 +18,9 @@
 // computes bit-identical points.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "core/contours.h"
 #include "core/mesh.h"
@@ -70,6 +72,22 @@ inline double squaredDistance(const Point3f& a, const Point3f& b) {
 inline bool sharesEdge(const Point3f* a, unsigned ea, const Point3f* b, unsigned eb, double tolerance2) {
   const unsigned a1 = (ea + 1) % 3, a2 = (ea + 2) % 3, b1 = (eb + 1) % 3, b2 = (eb + 2) % 3;
   return squaredDistance(a[a1], b[b2]) <= tolerance2 && squaredDistance(a[a2], b[b1]) <= tolerance2;
+}
+
+}  // namespace toposlice
+
+namespace toposlice {
+
+// The smallest float >= z. For a float coordinate v, (v >= z) == (v >= planeAsFloat(z)), so the on-plane
+// rule can be applied with float compares and still match the double-precision rule exactly.
+inline float planeAsFloat(double z) {
+  float f = static_cast<float>(z);
+  if (static_cast<double>(f) < z) f = std::nextafter(f, std::numeric_limits<float>::infinity());
+  return f;
+}
+
+inline unsigned aboveMaskF(const Point3f* corners, float zf) {
+  return (corners[0].z >= zf ? 1u : 0u) | (corners[1].z >= zf ? 2u : 0u) | (corners[2].z >= zf ? 4u : 0u);
 }
 
 }  // namespace toposlice

@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "core/contours.h"
+#include "core/march_mesh.h"
 #include "core/mesh.h"
 
 namespace toposlice {
@@ -25,6 +26,9 @@ namespace toposlice {
 struct MarchScratch {
   std::vector<uint32_t> stamp;
   std::vector<uint32_t> backward;  // facets found walking backwards from an open polyline's start
+  std::vector<uint32_t> loopMin;   // per loop: lowest facet index (record kernel)
+  std::vector<uint32_t> order;     // loop permutation (record kernel)
+  LayerContours sorted;            // reordered copy of a layer (record kernel)
   void prepare(std::size_t facetCount) {
     if (stamp.size() != facetCount) stamp.assign(facetCount, 0);
   }
@@ -37,5 +41,12 @@ struct MarchScratch {
 uint32_t marchLayer(std::span<const Point3f> corners, std::span<const int32_t> adjacency,
                     std::span<const uint32_t> active, double z, uint32_t mark, MarchScratch& scratch,
                     LayerContours& out);
+
+// The same layer from the reordered mesh (march_mesh.h): `active` lists crossing records (any order);
+// `stamp` entries are per record. Loops are walked from whichever record comes first and then put in
+// canonical form (closed loops rotated to start at their lowest facet index, loops sorted by it), so the
+// result equals marchLayer's bit for bit. Returns the number of open polylines.
+uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const uint32_t> active, double z,
+                           uint32_t mark, MarchScratch& scratch, LayerContours& out);
 
 }  // namespace toposlice

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "core/layer_ranges.h"
+#include "core/march_mesh.h"
 #include "core/slice_closest.h"
 #include "core/slice_march.h"
 #include "parallel/parallel.h"
@@ -52,10 +53,12 @@ FacetLayers facetLayersParallel(std::span<const Point3f> corners, std::span<cons
   return layers;
 }
 
-SliceStats sliceLazy(std::span<const Point3f> corners, std::span<int32_t> table, std::span<const double> planes,
-                     const FacetLayers& layers, const SliceSettings& settings, const LayerConsumer& consume,
-                     const ProgressContext* progress) {
+SliceStats sliceLazy(std::span<const Point3f> corners, std::span<const int32_t> startTable,
+                     std::span<const double> planes, const FacetLayers& layers, const SliceSettings& settings,
+                     const LayerConsumer& consume, const ProgressContext* progress) {
   SliceStats stats;
+  std::vector<int32_t> table(startTable.begin(), startTable.end());
+  if (table.empty()) table.assign(corners.size(), -1);
   LazySlicer slicer(corners, table, settings.joinTolerance);
   ActiveFacets active;
   LayerContours out;
@@ -80,7 +83,7 @@ SliceStats sliceLazy(std::span<const Point3f> corners, std::span<int32_t> table,
 
 }  // namespace
 
-SliceStats sliceModel(std::span<const Point3f> corners, std::span<int32_t> adjacency, std::span<const double> planes,
+SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency, std::span<const double> planes,
                       const SliceSettings& settings, const LayerConsumer& consume, const ProgressContext* progress) {
   const FacetLayers layers = facetLayersParallel(corners, planes);
   if (settings.method == SliceMethod::SelfReuseLazy)
@@ -94,8 +97,18 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<int32_t> adjac
   const std::size_t slots = std::min<std::size_t>(bands, 2 * threads);
   const double tolerance2 = settings.joinTolerance * settings.joinTolerance;
 
+  MarchMesh marchMesh;
+  const bool march = settings.method == SliceMethod::SelfReuse;
+  if (march) {
+    prepareMarchMesh(layers, corners.size() / 3, marchMesh);
+    parallelForChunks(marchMesh.facets.size(), 16384, [&](std::size_t begin, std::size_t end) {
+      fillMarchFacets(corners, adjacency, layers, begin, end, marchMesh);
+    });
+  }
+
   struct Slot {
     ActiveFacets active;
+    ActiveRecords records;
     MarchScratch march;
     ClosestScratch closest;
     std::vector<LayerContours> out;
@@ -111,15 +124,21 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<int32_t> adjac
         const auto k0 = static_cast<uint32_t>(b * band);
         const uint32_t k1 = std::min(layerCount, k0 + band);
         slot.out.resize(band);
-        slot.march.prepare(corners.size() / 3);
         for (uint32_t k = k0; k < k1; ++k) {
-          if (k == k0) slot.active.start(layers, k0);
-          else slot.active.advance(layers);
           LayerContours& out = slot.out[k - k0];
-          if (settings.method == SliceMethod::SelfReuse)
-            marchLayer(corners, adjacency, slot.active.facets(), planes[k], k + 1, slot.march, out);
-          else
+          if (march) {
+            if (k == k0) {
+              slot.march.prepare(marchMesh.facets.size());
+              slot.records.start(marchMesh, k0);
+            } else {
+              slot.records.advance(marchMesh);
+            }
+            marchRecordsLayer(marchMesh.facets, slot.records.records(), planes[k], k + 1, slot.march, out);
+          } else {
+            if (k == k0) slot.active.start(layers, k0);
+            else slot.active.advance(layers);
             closestPointLayer(corners, slot.active.facets(), planes[k], tolerance2, slot.closest, out);
+          }
         }
       },
       [&](std::size_t b, std::size_t s) {

@@ -36,11 +36,12 @@ struct SliceStats {
 
 using LayerConsumer = std::function<void(uint32_t layer, const LayerContours& contours)>;
 
-// Slices `corners` (3 per facet) at `planes` (ascending). `adjacency` (3 per facet): for SelfReuse a
-// complete table (built or loaded from a template), read only; for SelfReuseLazy the table to start
-// from (all -1, or a template's), updated in place; unused for ClosestPoint. `consume` is called once per
-// layer, in layer order, from one thread at a time. Progress counts layers.
-SliceStats sliceModel(std::span<const Point3f> corners, std::span<int32_t> adjacency, std::span<const double> planes,
+// Slices `corners` (3 per facet) at `planes` (ascending). `adjacency` (3 per facet): for SelfReuse the
+// complete table (built, or loaded from a template); for SelfReuseLazy the table to start from (empty for
+// all -1, or a template's), copied and completed as layers need it; unused for ClosestPoint. The
+// caller's table is never modified. `consume` is called once per layer, in layer order, from one thread
+// at a time. Progress counts layers.
+SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency, std::span<const double> planes,
                       const SliceSettings& settings, const LayerConsumer& consume,
                       const ProgressContext* progress = nullptr);
 

@@ -1,1 +1,233 @@
-int main() { return 0; }
+// toposlice: the command-line program. Subcommands: info, slice, template (and batch once jobs land).
+// Every failure prints one line "toposlice: error: <reason>" to stderr and exits non-zero.
+#include <CLI/CLI.hpp>
+
+#include <csignal>
+#include <cstdio>
+#include <string>
+#include <thread>
+
+#include "core/mesh_info.h"
+#include "core/planes.h"
+#include "core/weld.h"
+#include "io/errors.h"
+#include "io/output_file.h"
+#include "io/stl_reader.h"
+#include "io/template_file.h"
+#include "parallel/parallel.h"
+#include "tools/progress_bar.h"
+#include "tools/slice_job.h"
+
+namespace toposlice {
+namespace {
+
+std::atomic<bool> gCancel{false};
+
+extern "C" void onSignal(int signal) {
+  // Leave no partial output behind: remove the temporaries, then die by the same signal.
+  removePendingOutputs();
+  std::signal(signal, SIG_DFL);
+  std::raise(signal);
+}
+
+struct CommonOptions {
+  unsigned threads = 0;
+  bool quiet = false;
+};
+
+void addCommon(CLI::App* app, CommonOptions& common) {
+  app->add_option("--threads", common.threads, "Worker threads (default: all cores)");
+  app->add_flag("-q,--quiet", common.quiet, "No progress bar or summary, errors only");
+}
+
+struct PlaneOptions {
+  double layerHeight = 0;
+  uint32_t layers = 0;
+  double z0 = 0;
+  std::string zList;
+  CLI::Option* heightOpt = nullptr;
+  CLI::Option* layersOpt = nullptr;
+  CLI::Option* z0Opt = nullptr;
+};
+
+void addPlaneOptions(CLI::App* app, PlaneOptions& p) {
+  p.heightOpt = app->add_option("--layer-height,-H", p.layerHeight, "Layer height in mm (default 0.05)");
+  p.layersOpt = app->add_option("--layers", p.layers, "Number of layers (with no height: divide the model height)");
+  p.z0Opt = app->add_option("--z0", p.z0, "Bottom of layer 0 in mm (default: the model's lowest z)");
+  app->add_option("--z", p.zList, "Explicit plane heights in mm, comma separated, ascending")
+      ->excludes(p.heightOpt)
+      ->excludes(p.layersOpt)
+      ->excludes(p.z0Opt);
+}
+
+PlaneSpec planeSpec(const PlaneOptions& p) {
+  PlaneSpec spec;
+  if (!p.zList.empty()) {
+    if (!parseZList(p.zList, spec.explicitZ)) throw InputError("--z '" + p.zList + "': not a list of numbers");
+    return spec;
+  }
+  if (*p.heightOpt) spec.layerHeight = p.layerHeight;
+  if (*p.layersOpt) spec.layers = p.layers;
+  if (*p.z0Opt) spec.z0 = p.z0;
+  if (!spec.layerHeight && !spec.layers) spec.layerHeight = 0.05;
+  return spec;
+}
+
+void printBox(const BoundingBox& b) {
+  std::printf("bounding box   : [%.6g, %.6g] x [%.6g, %.6g] x [%.6g, %.6g] (size %.6g x %.6g x %.6g)\n", b.min.x,
+              b.max.x, b.min.y, b.max.y, b.min.z, b.max.z, double{b.max.x} - b.min.x, double{b.max.y} - b.min.y,
+              double{b.max.z} - b.min.z);
+}
+
+int runInfo(const std::string& model) {
+  StlSource source;
+  const FacetSoup soup = readStl(model, &source);
+  const IndexedMesh mesh = weldCorners(soup.corners);
+  std::vector<int32_t> table(soup.corners.size());
+  const EdgeStats edges = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
+  const double volume = signedVolume(soup.corners);
+  std::printf("model          : %s (%s STL%s)\n", model.c_str(), source.binary ? "binary" : "ASCII",
+              source.gzip ? ", gzip" : "");
+  std::printf("facets         : %zu\n", soup.facetCount());
+  std::printf("vertices       : %zu (welded)\n", mesh.vertices.size());
+  printBox(boundsOf(soup.corners));
+  std::printf("volume         : %.6f mm^3%s\n", volume, volume < 0 ? " (negative: the mesh is inside out)" : "");
+  std::printf("surface area   : %.6f mm^2\n", surfaceArea(soup.corners));
+  std::printf("shells         : %llu\n",
+              static_cast<unsigned long long>(countShells(mesh.facetVertices, mesh.vertices.size())));
+  std::printf("edges          : %llu\n", static_cast<unsigned long long>(edges.edges));
+  std::printf("boundary edges : %llu\n", static_cast<unsigned long long>(edges.boundary));
+  std::printf("non-manifold   : %llu edges\n", static_cast<unsigned long long>(edges.nonManifold));
+  std::printf("inconsistent   : %llu edges (two facets in the same direction)\n",
+              static_cast<unsigned long long>(edges.inconsistent));
+  std::printf("degenerate     : %llu facet edges with both ends on one vertex\n",
+              static_cast<unsigned long long>(edges.degenerate));
+  const bool closed = edges.boundary == 0 && edges.nonManifold == 0 && edges.inconsistent == 0;
+  std::printf("closed         : %s\n", closed ? "yes (every edge has exactly two facets, consistently oriented)" : "no");
+  return 0;
+}
+
+void printSliceSummary(const std::string& model, const SliceJobOptions& options, const SliceJobResult& r) {
+  std::printf("model      : %s, %llu facets\n", model.c_str(), static_cast<unsigned long long>(r.facets));
+  std::printf("method     : %s; topology %s\n", sliceMethodName(options.slice.method), r.topology.c_str());
+  if (r.edges.boundary + r.edges.nonManifold + r.edges.inconsistent > 0)
+    std::printf("defects    : %llu boundary, %llu non-manifold, %llu inconsistent edges\n",
+                static_cast<unsigned long long>(r.edges.boundary), static_cast<unsigned long long>(r.edges.nonManifold),
+                static_cast<unsigned long long>(r.edges.inconsistent));
+  std::printf("layers     : %llu, %llu segments, %llu loops, %llu open polylines\n",
+              static_cast<unsigned long long>(r.stats.layers), static_cast<unsigned long long>(r.stats.segments),
+              static_cast<unsigned long long>(r.stats.loops), static_cast<unsigned long long>(r.stats.openPolylines));
+  if (options.slice.method == SliceMethod::SelfReuseLazy)
+    std::printf("table      : %llu joins on %llu layers, %llu ends left open\n",
+                static_cast<unsigned long long>(r.stats.lazy.joins),
+                static_cast<unsigned long long>(r.stats.lazy.joinedLayers),
+                static_cast<unsigned long long>(r.stats.lazy.unjoined));
+  std::printf("time       : read %.3f s, weld+adjacency %.3f s, slice%s %.3f s, total %.3f s\n", r.readSeconds,
+              r.topologySeconds, r.written.empty() ? "" : "+write", r.sliceSeconds,
+              r.readSeconds + r.topologySeconds + r.sliceSeconds);
+  std::printf("peak memory: %.1f MiB\n", peakResidentMiB());
+  for (const auto& path : r.written) std::printf("wrote      : %s\n", path.c_str());
+}
+
+int runSlice(const std::string& model, const SliceJobOptions& options, const CommonOptions& common) {
+  ProgressBar bar("slicing", common.quiet);
+  ProgressContext progress;
+  progress.report = [&](uint64_t done, uint64_t total) { bar.update(done, total); };
+  progress.cancel = &gCancel;
+  const SliceJobResult result = runSliceJob(model, options, &progress);
+  bar.update(result.stats.layers, result.stats.layers);
+  if (!common.quiet) printSliceSummary(model, options, result);
+  return 0;
+}
+
+int runTemplate(const std::string& model, const std::string& output, bool force, bool quiet) {
+  const auto start = std::chrono::steady_clock::now();
+  const FacetSoup soup = readStl(model);
+  const IndexedMesh mesh = weldCorners(soup.corners);
+  const TemplateTable table = buildTemplateTable(mesh);
+  writeTemplateFile(output, table, force);
+  if (!quiet) {
+    const uint64_t missing = static_cast<uint64_t>(std::count(table.adjacency.begin(), table.adjacency.end(), -1));
+    std::printf("template   : %s, %u facets, %u vertices, fingerprint %016llx\n", model.c_str(), table.facetCount,
+                table.vertexCount, static_cast<unsigned long long>(table.fingerprint));
+    std::printf("table      : %llu of %zu entries without a neighbour\n", static_cast<unsigned long long>(missing),
+                table.adjacency.size());
+    std::printf("time       : %.3f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    std::printf("wrote      : %s\n", output.c_str());
+  }
+  return 0;
+}
+
+int run(int argc, char** argv) {
+  CLI::App app{"toposlice: fast slicing for mask-projection 3D printing, reusing topology across layers and models"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "toposlice 0.1.0");
+
+  CommonOptions common;
+  std::string model;
+
+  CLI::App* info = app.add_subcommand("info", "Print facets, vertices, bounds, volume, shells and edge defects");
+  info->add_option("model", model, "STL file (binary or ASCII, optionally .gz)")->required();
+
+  CLI::App* slice = app.add_subcommand("slice", "Slice a model into per-layer contours");
+  slice->add_option("model", model, "STL file (binary or ASCII, optionally .gz)")->required();
+  PlaneOptions planes;
+  addPlaneOptions(slice, planes);
+  SliceJobOptions options;
+  std::string method = "sr";
+  std::vector<std::string> outputs;
+  std::string templatePath, onMismatch = "fail";
+  slice->add_option("-o,--output", outputs, "Contour output, by extension: .cli (Common Layer Interface), .svg");
+  slice->add_option("--method", method, "cp (closest point), sr-lazy (paper's self reuse), sr (default)")
+      ->check(CLI::IsMember({"cp", "sr-lazy", "sr"}));
+  slice->add_flag("--cli-binary", options.cliBinary, "Write binary CLI instead of ASCII");
+  slice->add_option("--svg-layers", options.svgLayers, "Layers for .svg output: e.g. 0,10,20-30,mid,last (default mid)");
+  slice->add_option("--template", templatePath, "Template table (.topo) of a model with the same connectivity");
+  slice->add_option("--on-mismatch", onMismatch, "When the model does not match the template: fail or rebuild")
+      ->check(CLI::IsMember({"fail", "rebuild"}));
+  slice->add_option("--band-layers", options.slice.bandLayers, "Layers per parallel band (default: automatic)");
+  slice->add_option("--join-tolerance", options.slice.joinTolerance,
+                    "mm; cp and sr-lazy join segment ends this close (default 1e-5)");
+  slice->add_flag("-f,--force", options.overwrite, "Overwrite existing outputs");
+
+  CLI::App* templ = app.add_subcommand("template", "Save a template's adjacency table for its customized variants");
+  std::string templateOut;
+  bool templateForce = false;
+  templ->add_option("model", model, "Template STL")->required();
+  templ->add_option("-o,--output", templateOut, "Table file to write (.topo)")->required();
+  templ->add_flag("-f,--force", templateForce, "Overwrite an existing table");
+
+  for (CLI::App* sub : {info, slice, templ}) addCommon(sub, common);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  ThreadLimit limit(common.threads);
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+  try {
+    if (*info) return runInfo(model);
+    if (*templ) return runTemplate(model, templateOut, templateForce, common.quiet);
+    options.planes = planeSpec(planes);
+    parseSliceMethod(method, options.slice.method);
+    for (const auto& o : outputs) options.outputs.emplace_back(o);
+    options.rebuildOnMismatch = onMismatch == "rebuild";
+    TemplateTable table;
+    if (!templatePath.empty()) {
+      table = readTemplateFile(templatePath);
+      options.templateTable = &table;
+    }
+    return runSlice(model, options, common);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "toposlice: error: %s\n", e.what());
+    return 1;
+  }
+}
+
+}  // namespace
+}  // namespace toposlice
+
+int main(int argc, char** argv) { return toposlice::run(argc, argv); }

@@ -1,0 +1,49 @@
+#include "core/march_mesh.h"
+
+namespace toposlice {
+
+void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh) {
+  mesh.facets.resize(layers.bucketFacets.size());
+  mesh.layerStart = layers.bucketOffsets;
+  mesh.position.assign(facetCount, -1);
+  mesh.last.resize(layers.bucketFacets.size());
+  for (std::size_t p = 0; p < layers.bucketFacets.size(); ++p) {
+    mesh.position[layers.bucketFacets[p]] = static_cast<int32_t>(p);
+    mesh.last[p] = layers.last[layers.bucketFacets[p]];
+  }
+}
+
+void ActiveRecords::start(const MarchMesh& mesh, uint32_t layer) {
+  layer_ = layer;
+  active_.clear();
+  const uint32_t end = mesh.layerStart[layer + 1];  // records whose first layer is <= layer
+  for (uint32_t p = 0; p < end; ++p)
+    if (mesh.last[p] >= layer) active_.push_back(p);
+}
+
+void ActiveRecords::advance(const MarchMesh& mesh) {
+  const uint32_t k = ++layer_;
+  next_.clear();
+  for (const uint32_t p : active_)
+    if (mesh.last[p] >= k) next_.push_back(p);
+  for (uint32_t p = mesh.layerStart[k]; p < mesh.layerStart[k + 1]; ++p) next_.push_back(p);
+  active_.swap(next_);
+}
+
+void fillMarchFacets(std::span<const Point3f> corners, std::span<const int32_t> adjacency, const FacetLayers& layers,
+                     std::size_t begin, std::size_t end, MarchMesh& mesh) {
+  for (std::size_t p = begin; p < end; ++p) {
+    const uint32_t f = layers.bucketFacets[p];
+    MarchFacet& r = mesh.facets[p];
+    for (unsigned j = 0; j < 3; ++j) {
+      r.corner[j] = corners[3 * std::size_t{f} + j];
+      const int32_t n = adjacency[3 * std::size_t{f} + j];
+      r.next[j] = n < 0 ? -1 : mesh.position[static_cast<std::size_t>(n)];
+    }
+    r.id = f;
+    r.first = layers.first[f];
+    r.last = layers.last[f];
+  }
+}
+
+}  // namespace toposlice

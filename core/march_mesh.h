@@ -1,0 +1,56 @@
+// A slicing-friendly copy of a mesh for the marching kernel (data-oriented layout).
+//
+// Facets that cross some plane are reordered by the first layer they cross (the order of the
+// first-layer buckets), so the facets of one layer lie close together in memory and a band of layers
+// sweeps a window of the array. Each facet is one 64-byte record: its corners, its neighbours as record
+// positions, its original index and layer range. The marching walk then follows neighbours within a
+// cache-resident window instead of jumping through three arrays in file order. Built in linear time from
+// the facet layer ranges and the adjacency table (built or loaded from a template).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/layer_ranges.h"
+#include "core/mesh.h"
+
+namespace toposlice {
+
+struct alignas(64) MarchFacet {
+  Point3f corner[3];
+  int32_t next[3];  // record position across edge j, or -1
+  uint32_t id;      // the facet's index in the model
+  uint32_t first, last;  // layer range it crosses
+};
+static_assert(sizeof(MarchFacet) == 64);
+
+struct MarchMesh {
+  std::vector<MarchFacet> facets;       // crossing facets in first-layer order
+  std::vector<uint32_t> layerStart;     // per layer + 1: records whose first layer is k start at layerStart[k]
+  std::vector<int32_t> position;        // per model facet: its record, or -1 when it crosses no plane
+  std::vector<uint32_t> last;           // per record: last layer (compact copy for band start scans)
+};
+
+// The records crossing the current layer, maintained layer by layer like ActiveFacets (in record order,
+// not facet order: marchRecordsLayer restores the canonical order).
+class ActiveRecords {
+ public:
+  void start(const MarchMesh& mesh, uint32_t layer);
+  void advance(const MarchMesh& mesh);  // to layer() + 1
+  std::span<const uint32_t> records() const { return active_; }
+  uint32_t layer() const { return layer_; }
+
+ private:
+  std::vector<uint32_t> active_, next_;
+  uint32_t layer_ = 0;
+};
+
+// Sizes the mesh and fills `position` and `layerStart` from the buckets (serial, linear).
+void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh);
+
+// Fills records [begin, end) (callers may split the range across threads). Needs prepareMarchMesh first.
+void fillMarchFacets(std::span<const Point3f> corners, std::span<const int32_t> adjacency, const FacetLayers& layers,
+                     std::size_t begin, std::size_t end, MarchMesh& mesh);
+
+}  // namespace toposlice

@@ -1,0 +1,49 @@
+// One model through the whole slicing path: read, topology (built, loaded from a template, or none),
+// planes, slicing, and every requested output streamed layer by layer. Shared by `toposlice slice` and
+// `toposlice batch`.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "core/adjacency.h"
+#include "core/mesh.h"
+#include "core/planes.h"
+#include "core/progress.h"
+#include "io/template_file.h"
+#include "parallel/band_slicer.h"
+
+namespace toposlice {
+
+struct SliceJobOptions {
+  PlaneSpec planes;
+  SliceSettings slice;
+  std::vector<std::filesystem::path> outputs;  // contour files by extension: .cli, .svg
+  bool cliBinary = false;
+  std::string svgLayers = "mid";
+  bool overwrite = false;
+  const TemplateTable* templateTable = nullptr;  // intra-model reuse: skip welding and adjacency
+  bool rebuildOnMismatch = false;                // a variant that does not match: rebuild instead of failing
+};
+
+struct SliceJobResult {
+  uint64_t facets = 0;
+  BoundingBox bounds;
+  std::string topology;  // how the adjacency was obtained, for the summary
+  EdgeStats edges;       // when built here
+  double readSeconds = 0, topologySeconds = 0, sliceSeconds = 0;
+  SliceStats stats;
+  std::vector<std::filesystem::path> written;
+};
+
+// Throws InputError (bad model, variant mismatch, bad settings) or OutputError; on any error or
+// cancellation no output is left under its final name.
+SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
+                           const ProgressContext* progress);
+
+// Peak resident memory of this process so far, in MiB.
+double peakResidentMiB();
+
+}  // namespace toposlice
