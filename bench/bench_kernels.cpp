@@ -1,1 +1,153 @@
-int main() { return 0; }
+// Kernel benchmarks (Google Benchmark) on the aligner (544,774 facets) at 1 um layers. Each kernel runs
+// single-threaded; `--benchmark_filter` picks kernels. Model: TOPOSLICE_BENCH_MODEL or the derived aligner.
+#include <benchmark/benchmark.h>
+
+#include <cstdlib>
+
+#include "core/adjacency.h"
+#include "core/layer_ranges.h"
+#include "core/march_mesh.h"
+#include "core/mesh_info.h"
+#include "core/planes.h"
+#include "core/slice_closest.h"
+#include "core/slice_march.h"
+#include "core/weld.h"
+#include "io/stl_reader.h"
+#include "tests/fixtures/models.h"
+
+namespace toposlice {
+namespace {
+
+std::string modelFile() {
+  const char* env = std::getenv("TOPOSLICE_BENCH_MODEL");
+  return env ? env : fixtures::modelPath("derived/aligner_upper_case0.stl.gz").string();
+}
+
+struct Fixture {
+  FacetSoup soup;
+  IndexedMesh mesh;
+  std::vector<int32_t> table;
+  std::vector<double> planes;
+  FacetLayers layers;
+  MarchMesh march;
+
+  Fixture() {
+    soup = readStl(modelFile());
+    mesh = weldCorners(soup.corners);
+    table.resize(soup.corners.size());
+    buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
+    const BoundingBox box = boundsOf(soup.corners);
+    PlaneSpec spec;
+    spec.layerHeight = 0.001;
+    std::string error;
+    planes = makePlanes(spec, box.min.z, box.max.z, error);
+    layers = computeFacetLayers(soup.corners, planes);
+    prepareMarchMesh(layers, soup.facetCount(), march);
+    fillMarchFacets(soup.corners, table, layers, 0, march.facets.size(), march);
+  }
+};
+
+const Fixture& fixture() {
+  static const Fixture f;
+  return f;
+}
+
+void BM_ReadStlGz(benchmark::State& state) {
+  const std::string file = modelFile();
+  for (auto _ : state) benchmark::DoNotOptimize(readStl(file).corners.data());
+}
+BENCHMARK(BM_ReadStlGz)->Unit(benchmark::kMillisecond);
+
+void BM_Weld(benchmark::State& state) {
+  const Fixture& f = fixture();
+  for (auto _ : state) benchmark::DoNotOptimize(weldCorners(f.soup.corners).vertices.data());
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(f.soup.corners.size()));
+}
+BENCHMARK(BM_Weld)->Unit(benchmark::kMillisecond);
+
+void BM_Adjacency(benchmark::State& state) {
+  const Fixture& f = fixture();
+  std::vector<int32_t> table(f.soup.corners.size());
+  for (auto _ : state) benchmark::DoNotOptimize(buildAdjacency(f.mesh.facetVertices, f.mesh.vertices.size(), table));
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(f.soup.facetCount()));
+}
+BENCHMARK(BM_Adjacency)->Unit(benchmark::kMillisecond);
+
+void BM_FacetLayers(benchmark::State& state) {
+  const Fixture& f = fixture();
+  for (auto _ : state) benchmark::DoNotOptimize(computeFacetLayers(f.soup.corners, f.planes).bucketFacets.data());
+}
+BENCHMARK(BM_FacetLayers)->Unit(benchmark::kMillisecond);
+
+void BM_MarchMeshBuild(benchmark::State& state) {
+  const Fixture& f = fixture();
+  MarchMesh march;
+  for (auto _ : state) {
+    prepareMarchMesh(f.layers, f.soup.facetCount(), march);
+    fillMarchFacets(f.soup.corners, f.table, f.layers, 0, march.facets.size(), march);
+    benchmark::DoNotOptimize(march.facets.data());
+  }
+}
+BENCHMARK(BM_MarchMeshBuild)->Unit(benchmark::kMillisecond);
+
+// 512 layers from the middle of the model, marched in facet (file) order through the separate arrays.
+void BM_MarchFileOrder(benchmark::State& state) {
+  const Fixture& f = fixture();
+  MarchScratch scratch;
+  scratch.prepare(f.soup.facetCount());
+  ActiveFacets active;
+  LayerContours out;
+  const auto k0 = static_cast<uint32_t>(f.planes.size() / 2 - 256);
+  uint64_t segments = 0;
+  uint32_t mark = 0;
+  for (auto _ : state) {
+    for (uint32_t k = k0; k < k0 + 512; ++k) {
+      if (k == k0) active.start(f.layers, k0);
+      else active.advance(f.layers);
+      marchLayer(f.soup.corners, f.table, active.facets(), f.planes[k], ++mark, scratch, out);
+      segments += out.points.size();
+    }
+  }
+  state.SetItemsProcessed(static_cast<int64_t>(segments));
+}
+BENCHMARK(BM_MarchFileOrder)->Unit(benchmark::kMillisecond);
+
+// The same 512 layers through the reordered 64-byte records (the default sr kernel).
+void BM_MarchRecords(benchmark::State& state) {
+  const Fixture& f = fixture();
+  MarchScratch scratch;
+  scratch.prepare(f.march.facets.size());
+  ActiveRecords active;
+  LayerContours out;
+  const auto k0 = static_cast<uint32_t>(f.planes.size() / 2 - 256);
+  uint64_t segments = 0;
+  uint32_t mark = 0;
+  for (auto _ : state) {
+    for (uint32_t k = k0; k < k0 + 512; ++k) {
+      if (k == k0) active.start(f.march, k0);
+      else active.advance(f.march);
+      marchRecordsLayer(f.march.facets, active.records(), f.planes[k], ++mark, scratch, out);
+      segments += out.points.size();
+    }
+  }
+  state.SetItemsProcessed(static_cast<int64_t>(segments));
+}
+BENCHMARK(BM_MarchRecords)->Unit(benchmark::kMillisecond);
+
+// One mid-height layer joined by the closest-point rule (O(s^2)).
+void BM_ClosestPointLayer(benchmark::State& state) {
+  const Fixture& f = fixture();
+  ClosestScratch scratch;
+  ActiveFacets active;
+  const auto k = static_cast<uint32_t>(f.planes.size() / 2);
+  active.start(f.layers, k);
+  LayerContours out;
+  for (auto _ : state) closestPointLayer(f.soup.corners, active.facets(), f.planes[k], 1e-10, scratch, out);
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(active.facets().size()));
+}
+BENCHMARK(BM_ClosestPointLayer)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace toposlice
+
+BENCHMARK_MAIN();
