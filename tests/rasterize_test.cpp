@@ -1,0 +1,535 @@
+#include "core/rasterize.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <vector>
+
+namespace toposlice {
+namespace {
+
+using Loop = std::vector<Point2d>;
+
+// Counter-clockwise rectangle [x0, x1] x [y0, y1] (an outer loop).
+Loop rect(double x0, double y0, double x1, double y1) {
+  return {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}};
+}
+
+Loop reversed(Loop loop) {
+  return Loop(loop.rbegin(), loop.rend());
+}
+
+// Counter-clockwise regular polygon with n vertices on a circle.
+Loop circle(double cx, double cy, double r, int n) {
+  Loop loop;
+  for (int k = 0; k < n; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / n;
+    loop.push_back({cx + r * std::cos(a), cy + r * std::sin(a)});
+  }
+  return loop;
+}
+
+LayerContours makeLayer(const std::vector<Loop>& loops, bool closed = true) {
+  LayerContours layer;
+  uint32_t facet = 0;
+  for (const Loop& loop : loops) {
+    for (const Point2d& p : loop) layer.addPoint(p, facet++);
+    layer.endLoop(closed);
+  }
+  return layer;
+}
+
+PixelGrid makeGrid(double x0, double y0, double pixel, uint32_t width, uint32_t height) {
+  PixelGrid grid;
+  grid.x0 = x0;
+  grid.y0 = y0;
+  grid.pixel = pixel;
+  grid.width = width;
+  grid.height = height;
+  return grid;
+}
+
+PixelGrid unitGrid(uint32_t width, uint32_t height) {
+  return makeGrid(0, 0, 1, width, height);
+}
+
+MaskImage binary(std::vector<ContourSet> sets, const PixelGrid& grid) {
+  MaskImage out;
+  RasterScratch scratch;
+  rasterizeBinary(sets, grid, out, scratch);
+  return out;
+}
+
+MaskImage coverage(std::vector<ContourSet> sets, const PixelGrid& grid, uint32_t sub = kDefaultSubScanlines) {
+  MaskImage out;
+  RasterScratch scratch;
+  rasterizeCoverage(sets, grid, out, scratch, sub);
+  return out;
+}
+
+uint8_t at(const MaskImage& m, uint32_t i, uint32_t j) {
+  return m.pixels[static_cast<std::size_t>(j) * m.width + i];
+}
+
+// Every pixel is 255 where `lit(i, j)` and 0 elsewhere.
+void expectPattern(const MaskImage& m, const std::function<bool(uint32_t, uint32_t)>& lit) {
+  for (uint32_t j = 0; j < m.height; ++j) {
+    for (uint32_t i = 0; i < m.width; ++i) {
+      ASSERT_EQ(at(m, i, j), lit(i, j) ? 255 : 0) << "pixel (" << i << ", " << j << ")";
+    }
+  }
+}
+
+std::size_t litInRow(const MaskImage& m, uint32_t j) {
+  std::size_t n = 0;
+  for (uint32_t i = 0; i < m.width; ++i) n += at(m, i, j) != 0 ? 1 : 0;
+  return n;
+}
+
+TEST(RasterBinary, SquareLightsExactlyThePixelCentresInside) {
+  const LayerContours layer = makeLayer({rect(2.2, 3.1, 7.8, 5.9)});
+  const MaskImage m = binary({{&layer, 1}}, unitGrid(10, 10));
+  ASSERT_EQ(m.width, 10u);
+  ASSERT_EQ(m.height, 10u);
+  ASSERT_EQ(m.pixels.size(), 100u);
+  EXPECT_EQ(countLitPixels(m), 18u);  // centres 2.5..7.5 x 3.5..5.5
+  expectPattern(m, [](uint32_t i, uint32_t j) { return i >= 2 && i <= 7 && j >= 3 && j <= 5; });
+  EXPECT_DOUBLE_EQ(maskArea(m, 1.0), 18.0);
+}
+
+TEST(RasterBinary, OffsetGridWithSmallPixels) {
+  // Centres x = 10 + (i + 1/2) 0.25, y = -5 + (j + 1/2) 0.25: i = 1..3 and j = 2..3 are inside.
+  const LayerContours layer = makeLayer({rect(10.3, -4.6, 11.1, -4.0)});
+  const MaskImage m = binary({{&layer, 1}}, makeGrid(10, -5, 0.25, 8, 8));
+  EXPECT_EQ(countLitPixels(m), 6u);
+  expectPattern(m, [](uint32_t i, uint32_t j) { return i >= 1 && i <= 3 && j >= 2 && j <= 3; });
+  EXPECT_DOUBLE_EQ(maskArea(m, 0.25), 6 * 0.0625);
+}
+
+TEST(RasterBinary, ClockwiseHoleIsEmpty) {
+  const LayerContours layer = makeLayer({rect(0, 0, 10, 10), reversed(rect(3, 3, 6, 6))});
+  const MaskImage m = binary({{&layer, 1}}, unitGrid(12, 12));
+  EXPECT_EQ(countLitPixels(m), 91u);
+  expectPattern(m, [](uint32_t i, uint32_t j) {
+    const bool outer = i < 10 && j < 10;
+    const bool hole = i >= 3 && i < 6 && j >= 3 && j < 6;
+    return outer && !hole;
+  });
+}
+
+TEST(RasterBinary, OverlappingOuterLoopsStaySolid) {
+  const LayerContours both = makeLayer({rect(1, 1, 6, 6), rect(4, 4, 9, 9)});
+  const MaskImage m = binary({{&both, 1}}, unitGrid(10, 10));
+  EXPECT_EQ(countLitPixels(m), 46u);  // 25 + 25 - 4: the union
+  EXPECT_EQ(at(m, 4, 4), 255);        // winding 2
+  EXPECT_EQ(at(m, 5, 5), 255);
+  EXPECT_EQ(at(m, 2, 7), 0);
+
+  // The same squares as two sets (model and add-on) give the same bytes.
+  const LayerContours a = makeLayer({rect(1, 1, 6, 6)});
+  const LayerContours b = makeLayer({rect(4, 4, 9, 9)});
+  EXPECT_EQ(binary({{&a, 1}, {&b, 1}}, unitGrid(10, 10)).pixels, m.pixels);
+}
+
+TEST(RasterBinary, RemovalSetPunchesHole) {
+  const LayerContours model = makeLayer({rect(0, 0, 10, 10)});
+  const LayerContours removal = makeLayer({rect(3, 3, 6, 6)});  // a feature mesh's CCW contour
+  const MaskImage m = binary({{&model, 1}, {&removal, -1}}, unitGrid(12, 12));
+  EXPECT_EQ(countLitPixels(m), 91u);
+  const LayerContours holed = makeLayer({rect(0, 0, 10, 10), reversed(rect(3, 3, 6, 6))});
+  EXPECT_EQ(m.pixels, binary({{&holed, 1}}, unitGrid(12, 12)).pixels);
+}
+
+TEST(RasterBinary, RemovalOutsideModelDoesNothing) {
+  const LayerContours model = makeLayer({rect(0, 0, 5, 5)});
+  const LayerContours away = makeLayer({rect(6, 6, 9, 9)});
+  const MaskImage m = binary({{&model, 1}, {&away, -1}}, unitGrid(10, 10));
+  EXPECT_EQ(countLitPixels(m), 25u);  // winding -1 is not solid
+  EXPECT_EQ(at(m, 7, 7), 0);
+
+  // Abutting on the left: the count jumps from -1 to +1 at x = 2 (both crossings at once).
+  const LayerContours small = makeLayer({rect(2, 1, 6, 5)});
+  const LayerContours beside = makeLayer({rect(-3, 1, 2, 5)});
+  const MaskImage smallAlone = binary({{&small, 1}}, unitGrid(10, 10));
+  EXPECT_EQ(countLitPixels(smallAlone), 16u);
+  EXPECT_EQ(binary({{&small, 1}, {&beside, -1}}, unitGrid(10, 10)).pixels, smallAlone.pixels);
+  EXPECT_EQ(coverage({{&small, 1}, {&beside, -1}}, unitGrid(10, 10)).pixels, smallAlone.pixels);
+
+  // Partly overlapping: only the inside part is subtracted, the outside part stays empty.
+  const LayerContours straddling = makeLayer({rect(3, 3, 9, 9)});
+  const MaskImage p = binary({{&model, 1}, {&straddling, -1}}, unitGrid(10, 10));
+  EXPECT_EQ(countLitPixels(p), 21u);
+  expectPattern(p, [](uint32_t i, uint32_t j) { return i < 5 && j < 5 && !(i >= 3 && j >= 3); });
+}
+
+TEST(RasterBinary, RemovalBelowAddOnOverlapLeavesWindingOne) {
+  // Model x in [0,6], add-on [3,9], removal [2,8]: counts 1, 0, 1 (=1+1-1), 0, 1 along x.
+  const LayerContours model = makeLayer({rect(0, 0, 6, 6)});
+  const LayerContours addOn = makeLayer({rect(3, 0, 9, 6)});
+  const LayerContours removal = makeLayer({rect(2, 0, 8, 6)});
+  const MaskImage m = binary({{&model, 1}, {&addOn, 1}, {&removal, -1}}, unitGrid(10, 6));
+  EXPECT_EQ(countLitPixels(m), 36u);
+  expectPattern(m, [](uint32_t i, uint32_t) { return i < 2 || (i >= 3 && i < 6) || i == 8; });
+}
+
+TEST(RasterBinary, RemovalEqualToModelCancelsExactly) {
+  // Slanted edges: crossings are interpolated from each edge's lower end, so reversed edges match.
+  const LayerContours model = makeLayer({circle(4.37, 5.11, 3.3, 37)});
+  const MaskImage alone = binary({{&model, 1}}, makeGrid(0, 0, 0.1, 100, 100));
+  EXPECT_GT(countLitPixels(alone), 3000u);
+  EXPECT_EQ(countLitPixels(binary({{&model, 1}, {&model, -1}}, makeGrid(0, 0, 0.1, 100, 100))), 0u);
+  EXPECT_EQ(countLitPixels(coverage({{&model, 1}, {&model, -1}}, makeGrid(0, 0, 0.1, 100, 100))), 0u);
+}
+
+TEST(RasterBinary, ClockwiseOnlyLoopIsEmpty) {
+  const LayerContours layer = makeLayer({reversed(rect(1, 1, 8, 8)), reversed(circle(5, 5, 2, 20))});
+  EXPECT_EQ(countLitPixels(binary({{&layer, 1}}, unitGrid(10, 10))), 0u);
+  EXPECT_EQ(countLitPixels(coverage({{&layer, 1}}, unitGrid(10, 10))), 0u);
+}
+
+TEST(RasterBinary, OpenAndNonFiniteLoopsAreSkippedAndCounted) {
+  const LayerContours open = makeLayer({rect(1, 1, 8, 8)}, false);
+  EXPECT_EQ(countLitPixels(binary({{&open, 1}}, unitGrid(10, 10))), 0u);
+
+  LayerContours mixed =
+      makeLayer({rect(1, 1, 3, 3), {{4, 4}, {9, 4}, {9, std::numeric_limits<double>::quiet_NaN()}}});
+  mixed.addPoint({5, 5}, 99);
+  mixed.addPoint({6, 5}, 100);
+  mixed.endLoop(false);
+  const std::vector<ContourSet> sets = {{&open, 1}, {&mixed, 1}};
+  EXPECT_EQ(countSkippedLoops(sets), 3u);
+  const MaskImage m = binary(sets, unitGrid(10, 10));
+  EXPECT_EQ(countLitPixels(m), 4u);  // only the valid square
+  expectPattern(m, [](uint32_t i, uint32_t j) { return i >= 1 && i < 3 && j >= 1 && j < 3; });
+}
+
+TEST(RasterBinary, PixelCentresOnEdgesFollowHalfOpenRule) {
+  // Left and bottom boundaries include a centre lying on them, right and top boundaries exclude it.
+  const LayerContours square = makeLayer({rect(0.5, 0.5, 3.5, 2.5)});
+  const MaskImage m = binary({{&square, 1}}, unitGrid(6, 5));
+  EXPECT_EQ(countLitPixels(m), 6u);
+  expectPattern(m, [](uint32_t i, uint32_t j) { return i <= 2 && j <= 1; });
+
+  // Two solids sharing an edge through pixel centres light each of those centres exactly once.
+  const LayerContours left = makeLayer({rect(0.5, 0.5, 2.5, 2.5)});
+  const LayerContours right = makeLayer({rect(2.5, 0.5, 4.5, 2.5)});
+  EXPECT_EQ(countLitPixels(binary({{&left, 1}}, unitGrid(6, 5))), 4u);
+  EXPECT_EQ(countLitPixels(binary({{&right, 1}}, unitGrid(6, 5))), 4u);
+  const LayerContours whole = makeLayer({rect(0.5, 0.5, 4.5, 2.5)});
+  EXPECT_EQ(binary({{&left, 1}, {&right, 1}}, unitGrid(6, 5)).pixels,
+            binary({{&whole, 1}}, unitGrid(6, 5)).pixels);
+
+  // A slanted right boundary x + y = 5 through centres (i + j = 4): those centres are outside.
+  const LayerContours triangle = makeLayer({{{0.5, 0.5}, {4.5, 0.5}, {0.5, 4.5}}});
+  const MaskImage t = binary({{&triangle, 1}}, unitGrid(6, 6));
+  EXPECT_EQ(countLitPixels(t), 10u);  // 4 + 3 + 2 + 1
+  expectPattern(t, [](uint32_t i, uint32_t j) { return i + j < 4; });
+}
+
+TEST(RasterBinary, VertexOnRowCentreCountedOnce) {
+  // Diamond with all four vertices on pixel centres: the side vertices are passed through (counted
+  // once), the bottom one is a minimum (two crossings at the same x, empty run), the top one a maximum.
+  const LayerContours diamond = makeLayer({{{5.5, 1.5}, {9.5, 5.5}, {5.5, 9.5}, {1.5, 5.5}}});
+  const MaskImage m = binary({{&diamond, 1}}, unitGrid(11, 11));
+  const std::size_t expected[11] = {0, 0, 2, 4, 6, 8, 6, 4, 2, 0, 0};
+  for (uint32_t j = 0; j < 11; ++j) EXPECT_EQ(litInRow(m, j), expected[j]) << "row " << j;
+  EXPECT_EQ(countLitPixels(m), 32u);  // the diamond's area
+  EXPECT_EQ(at(m, 1, 5), 255);        // centre on the left vertex: inside
+  EXPECT_EQ(at(m, 9, 5), 0);          // centre on the right vertex: outside
+
+  // A notch whose lowest vertex (5, 5.5) lies on a row centre: the two edges meeting there cancel
+  // and row 5 stays whole. Area = 8 x 7 - 10 = 46.
+  const LayerContours notch = makeLayer({{{1, 1}, {9, 1}, {9, 8}, {5, 5.5}, {1, 8}}});
+  const MaskImage n = binary({{&notch, 1}}, unitGrid(10, 10));
+  const std::size_t notchRows[10] = {0, 8, 8, 8, 8, 8, 4, 2, 0, 0};
+  for (uint32_t j = 0; j < 10; ++j) EXPECT_EQ(litInRow(n, j), notchRows[j]) << "row " << j;
+  EXPECT_EQ(countLitPixels(n), 46u);
+}
+
+TEST(RasterBinary, ContoursOutsideGridAreClipped) {
+  const PixelGrid grid = unitGrid(10, 10);
+  const LayerContours huge = makeLayer({rect(-100, -100, 100, 100)});
+  EXPECT_EQ(countLitPixels(binary({{&huge, 1}}, grid)), 100u);
+  const LayerContours partly = makeLayer({rect(-3, -2, 4, 30)});
+  const MaskImage p = binary({{&partly, 1}}, grid);
+  EXPECT_EQ(countLitPixels(p), 40u);
+  expectPattern(p, [](uint32_t i, uint32_t) { return i < 4; });
+  const LayerContours away = makeLayer({rect(20, 20, 30, 30), rect(-30, 2, -20, 5)});
+  EXPECT_EQ(countLitPixels(binary({{&away, 1}}, grid)), 0u);
+  const LayerContours band = makeLayer({rect(-1e30, 2, 1e30, 3)});
+  const MaskImage b = binary({{&band, 1}}, grid);
+  EXPECT_EQ(countLitPixels(b), 10u);
+  expectPattern(b, [](uint32_t, uint32_t j) { return j == 2; });
+  // A hole larger than the grid around a model larger than the grid: nothing.
+  const LayerContours frame = makeLayer({rect(-50, -50, 50, 50), reversed(rect(-20, -20, 20, 20))});
+  EXPECT_EQ(countLitPixels(binary({{&frame, 1}}, grid)), 0u);
+  EXPECT_EQ(countLitPixels(coverage({{&frame, 1}}, grid)), 0u);
+}
+
+TEST(RasterBinary, MirrorFlipsAtWriteTime) {
+  // An L shape in a non-square grid, off the pixel edges: no symmetry to hide a wrong flip, and the
+  // coverage mask has fractional pixels on every side.
+  const LayerContours l =
+      makeLayer({{{0.2, 0.1}, {3.3, 0.1}, {3.3, 1.4}, {1.2, 1.4}, {1.2, 4.3}, {0.2, 4.3}}});
+  for (bool anti : {false, true}) {
+    PixelGrid grid = makeGrid(0, 0, 1, 7, 5);
+    const std::vector<ContourSet> sets = {{&l, 1}};
+    const MaskImage plain = anti ? coverage(sets, grid) : binary(sets, grid);
+    EXPECT_EQ(countLitPixels(plain), anti ? 14u : 6u);
+    for (int mode = 1; mode < 4; ++mode) {
+      grid.mirrorX = (mode & 1) != 0;
+      grid.mirrorY = (mode & 2) != 0;
+      const MaskImage m = anti ? coverage(sets, grid) : binary(sets, grid);
+      ASSERT_EQ(m.width, 7u);
+      ASSERT_EQ(m.height, 5u);
+      for (uint32_t j = 0; j < 5; ++j) {
+        for (uint32_t i = 0; i < 7; ++i) {
+          const uint32_t mi = grid.mirrorX ? 6 - i : i, mj = grid.mirrorY ? 4 - j : j;
+          ASSERT_EQ(at(m, mi, mj), at(plain, i, j)) << "mode " << mode << " pixel " << i << "," << j;
+        }
+      }
+    }
+  }
+}
+
+TEST(RasterBinary, ScratchReuseGivesSameBytes) {
+  const LayerContours a = makeLayer({circle(3.2, 2.9, 2.1, 300), reversed(circle(3.0, 3.1, 0.7, 50))});
+  const LayerContours b = makeLayer({rect(0.3, 0.2, 5.7, 1.9), circle(1, 5, 0.9, 40)});
+  const PixelGrid grid = makeGrid(0, 0, 0.05, 130, 140);
+  RasterScratch scratch;
+  MaskImage first, other, again;
+  rasterizeBinary(std::vector<ContourSet>{{&a, 1}}, grid, first, scratch);
+  rasterizeBinary(std::vector<ContourSet>{{&b, 1}}, grid, other, scratch);
+  again = other;  // reused output buffer, fully overwritten
+  rasterizeBinary(std::vector<ContourSet>{{&a, 1}}, grid, again, scratch);
+  EXPECT_EQ(again.pixels, first.pixels);
+  EXPECT_NE(other.pixels, first.pixels);
+
+  rasterizeCoverage(std::vector<ContourSet>{{&a, 1}}, grid, first, scratch);
+  rasterizeCoverage(std::vector<ContourSet>{{&b, 1}}, grid, other, scratch);
+  again = other;
+  rasterizeCoverage(std::vector<ContourSet>{{&a, 1}}, grid, again, scratch);
+  EXPECT_EQ(again.pixels, first.pixels);
+}
+
+TEST(RasterBinary, EmptyGridAndEmptySets) {
+  const LayerContours layer = makeLayer({rect(0, 0, 5, 5)});
+  MaskImage m;
+  m.pixels.assign(7, 1);
+  RasterScratch scratch;
+  rasterizeBinary(std::vector<ContourSet>{{&layer, 1}}, unitGrid(0, 4), m, scratch);
+  EXPECT_EQ(m.width, 0u);
+  EXPECT_EQ(m.height, 4u);
+  EXPECT_TRUE(m.pixels.empty());
+  rasterizeBinary(std::span<const ContourSet>(), unitGrid(3, 4), m, scratch);
+  EXPECT_EQ(m.pixels, std::vector<uint8_t>(12, 0));
+}
+
+// Reference: the winding count at (x, y) from every edge of every set, with the same half-open rule in y,
+// the same crossing interpolation (from the lower end) and a crossing at x counted as passed (x <= px).
+int bruteWinding(const std::vector<ContourSet>& sets, double px, double py) {
+  int w = 0;
+  for (const ContourSet& set : sets) {
+    for (std::size_t l = 0; l < set.layer->loopCount(); ++l) {
+      const std::span<const Point2d> loop = set.layer->loopPoints(l);
+      for (std::size_t i = 0; i < loop.size(); ++i) {
+        const Point2d a = loop[i], b = loop[(i + 1) % loop.size()];
+        if ((a.y <= py) == (b.y <= py)) continue;
+        const Point2d lo = a.y < b.y ? a : b, hi = a.y < b.y ? b : a;
+        const double x = lo.x + (py - lo.y) * ((hi.x - lo.x) / (hi.y - lo.y));
+        if (x <= px) w += (a.y < b.y ? -1 : 1) * set.sign;
+      }
+    }
+  }
+  return w;
+}
+
+// Random self-intersecting loops on a quarter-pixel lattice (many vertices and crossings exactly on
+// pixel centres), in three sets with signs +1, +1, -1, some loops reaching outside the grid.
+std::vector<LayerContours> randomLayers(std::mt19937& rng) {
+  std::uniform_int_distribution<int> coord(-8, 4 * 26 + 8), count(3, 9);
+  std::vector<LayerContours> layers(3);
+  for (LayerContours& layer : layers) {
+    const int loops = count(rng) / 3;
+    std::vector<Loop> ls;
+    for (int l = 0; l < loops; ++l) {
+      Loop loop;
+      const int n = count(rng);
+      for (int k = 0; k < n; ++k) loop.push_back({0.25 * coord(rng), 0.25 * coord(rng)});
+      ls.push_back(loop);
+    }
+    layer = makeLayer(ls);
+  }
+  return layers;
+}
+
+TEST(RasterBinary, MatchesBruteForceWindingOnRandomLoops) {
+  std::mt19937 rng(12345);
+  const PixelGrid grid = unitGrid(24, 22);
+  RasterScratch scratch;
+  MaskImage m;
+  std::size_t litTotal = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const std::vector<LayerContours> layers = randomLayers(rng);
+    const std::vector<ContourSet> sets = {{&layers[0], 1}, {&layers[1], 1}, {&layers[2], -1}};
+    rasterizeBinary(sets, grid, m, scratch);
+    for (uint32_t j = 0; j < grid.height; ++j) {
+      for (uint32_t i = 0; i < grid.width; ++i) {
+        const bool solid = bruteWinding(sets, i + 0.5, j + 0.5) > 0;
+        ASSERT_EQ(at(m, i, j), solid ? 255 : 0) << "trial " << trial << " pixel " << i << "," << j;
+      }
+    }
+    litTotal += countLitPixels(m);
+  }
+  EXPECT_GT(litTotal, 200u * 24 * 22 / 10);  // the fixtures are not trivially empty
+}
+
+TEST(RasterCoverage, MatchesBruteForceSubScanlinesOnRandomLoops) {
+  // Reference: per sub-scanline, solid length per pixel from brute-force winding tested at the midpoints
+  // between consecutive crossings; values may differ by one level from floating-point rounding.
+  std::mt19937 rng(777);
+  const PixelGrid grid = unitGrid(24, 22);
+  const uint32_t sub = 4;
+  RasterScratch scratch;
+  MaskImage m;
+  for (int trial = 0; trial < 40; ++trial) {
+    const std::vector<LayerContours> layers = randomLayers(rng);
+    const std::vector<ContourSet> sets = {{&layers[0], 1}, {&layers[1], 1}, {&layers[2], -1}};
+    rasterizeCoverage(sets, grid, m, scratch, sub);
+    std::vector<double> covered(grid.width * grid.height, 0.0);
+    for (uint32_t k = 0; k < grid.height * sub; ++k) {
+      const double y = (k + 0.5) / sub;
+      std::vector<double> xs = {-1e9, 1e9};
+      for (const LayerContours& layer : layers) {
+        for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+          const std::span<const Point2d> loop = layer.loopPoints(l);
+          for (std::size_t i = 0; i < loop.size(); ++i) {
+            const Point2d a = loop[i], b = loop[(i + 1) % loop.size()];
+            if ((a.y <= y) == (b.y <= y)) continue;
+            const Point2d lo = a.y < b.y ? a : b, hi = a.y < b.y ? b : a;
+            xs.push_back(lo.x + (y - lo.y) * ((hi.x - lo.x) / (hi.y - lo.y)));
+          }
+        }
+      }
+      std::sort(xs.begin(), xs.end());
+      for (std::size_t c = 0; c + 1 < xs.size(); ++c) {
+        if (xs[c] == xs[c + 1] || bruteWinding(sets, xs[c], y) <= 0) continue;
+        for (uint32_t i = 0; i < grid.width; ++i) {
+          const double len = std::min(xs[c + 1], i + 1.0) - std::max(xs[c], static_cast<double>(i));
+          if (len > 0) covered[(k / sub) * grid.width + i] += len;
+        }
+      }
+    }
+    for (uint32_t p = 0; p < grid.width * grid.height; ++p) {
+      const int expected = static_cast<int>(std::floor(255.0 * covered[p] / sub + 0.5));
+      ASSERT_NEAR(m.pixels[p], expected, 1) << "trial " << trial << " pixel " << p;
+    }
+  }
+}
+
+// Regular 1000-gon of radius 2 mm at 0.05 mm pixels (about 250 boundary pixels).
+struct CircleCase {
+  LayerContours layer = makeLayer({circle(3.013, 2.971, 2.0, 1000)});
+  PixelGrid grid = makeGrid(0, 0, 0.05, 120, 120);
+  double area = layerSignedArea(layer);
+  double perimeter = 2 * std::numbers::pi * 2.0;
+};
+
+TEST(RasterBinary, CircleAreaWithinPixelError) {
+  const CircleCase c;
+  EXPECT_NEAR(c.area, std::numbers::pi * 4.0, 1e-3);
+  const MaskImage m = binary({{&c.layer, 1}}, c.grid);
+  const double p2 = c.grid.pixel * c.grid.pixel;
+  // Only pixels within half a diagonal of the boundary can be misclassified; the errors are signed and
+  // mostly cancel. Bound: 5% of the boundary pixel count (about 13 pixels).
+  const double boundaryPixels = c.perimeter / c.grid.pixel;
+  EXPECT_NEAR(static_cast<double>(countLitPixels(m)) * p2, c.area, 0.05 * boundaryPixels * p2);
+  EXPECT_DOUBLE_EQ(maskArea(m, c.grid.pixel), static_cast<double>(countLitPixels(m)) * p2);
+}
+
+TEST(RasterCoverage, CircleAreaWithinRoundingError) {
+  const CircleCase c;
+  const MaskImage m = coverage({{&c.layer, 1}}, c.grid);
+  std::size_t partial = 0;
+  for (uint8_t v : m.pixels) partial += (v != 0 && v != 255) ? 1 : 0;
+  EXPECT_GT(partial, 250u);
+  EXPECT_LT(partial, 2 * 260u);
+  const double p2 = c.grid.pixel * c.grid.pixel;
+  // Each partial pixel rounds by at most 0.5/255 of a pixel; the vertical sampling of a smooth convex
+  // boundary adds far less. The bound is 1/8 of the worst rounding case (signed errors cancel).
+  const double bound = 0.125 * static_cast<double>(partial) * 0.5 / 255.0 * p2;
+  EXPECT_NEAR(maskArea(m, c.grid.pixel), c.area, bound);
+  EXPECT_LT(bound, 0.01 * p2 * c.perimeter / c.grid.pixel);  // much tighter than the binary bound
+}
+
+TEST(RasterCoverage, AxisAlignedFractionsAreExact) {
+  // x: column 2 covered 0.75, columns 3-4 fully, column 5 half. y: rows 1-2 fully, row 3 a quarter
+  // (4 of 16 sub-scanlines, exact since 0.25 is a multiple of 1/16).
+  const LayerContours layer = makeLayer({rect(2.25, 1.0, 5.5, 3.25)});
+  const MaskImage m = coverage({{&layer, 1}}, unitGrid(8, 5));
+  const double fx[8] = {0, 0, 0.75, 1, 1, 0.5, 0, 0};
+  const double fy[5] = {0, 1, 1, 0.25, 0};
+  for (uint32_t j = 0; j < 5; ++j) {
+    for (uint32_t i = 0; i < 8; ++i) {
+      EXPECT_EQ(at(m, i, j), static_cast<int>(std::floor(255.0 * fx[i] * fy[j] + 0.5))) << i << "," << j;
+    }
+  }
+  EXPECT_EQ(at(m, 2, 1), 191);
+  EXPECT_EQ(at(m, 5, 1), 128);  // 127.5 rounds up
+  EXPECT_EQ(at(m, 2, 3), 48);
+}
+
+TEST(RasterCoverage, DiagonalCutsPixelInHalf) {
+  const LayerContours layer = makeLayer({{{0, 0}, {1, 0}, {0, 1}}});
+  const MaskImage m = coverage({{&layer, 1}}, unitGrid(2, 2));
+  EXPECT_EQ(m.pixels, (std::vector<uint8_t>{128, 0, 0, 0}));
+}
+
+TEST(RasterCoverage, SubScanlineCountSetsVerticalResolution) {
+  // A strip 0.3 pixel high: S = 1 samples only the centre (missed), S = 10 hits 3 of 10, S = 16 5 of 16.
+  const LayerContours strip = makeLayer({rect(0, 0, 1, 0.3)});
+  EXPECT_EQ(coverage({{&strip, 1}}, unitGrid(1, 1), 1).pixels[0], 0);
+  EXPECT_EQ(coverage({{&strip, 1}}, unitGrid(1, 1), 10).pixels[0], 77);
+  EXPECT_EQ(coverage({{&strip, 1}}, unitGrid(1, 1)).pixels[0], 80);
+}
+
+TEST(RasterCoverage, PixelAlignedShapesMatchBinary) {
+  const LayerContours layer = makeLayer({rect(2, 3, 7, 9), reversed(rect(4, 5, 5, 6))});
+  const LayerContours removal = makeLayer({rect(6, 0, 8, 4)});
+  const std::vector<ContourSet> sets = {{&layer, 1}, {&removal, -1}};
+  const MaskImage c = coverage(sets, unitGrid(10, 10));
+  EXPECT_EQ(c.pixels, binary(sets, unitGrid(10, 10)).pixels);
+  EXPECT_EQ(countLitPixels(c), 28u);  // 30 - 1 (hole) - 1 (removal)
+}
+
+TEST(RasterCoverage, RemovalRunEndsAreFractional) {
+  const LayerContours model = makeLayer({rect(0, 0, 4, 4)});
+  const LayerContours removal = makeLayer({rect(1.5, -1, 2.5, 5)});
+  const MaskImage m = coverage({{&model, 1}, {&removal, -1}}, unitGrid(5, 4));
+  for (uint32_t j = 0; j < 4; ++j) {
+    EXPECT_EQ(at(m, 0, j), 255);
+    EXPECT_EQ(at(m, 1, j), 128);
+    EXPECT_EQ(at(m, 2, j), 128);
+    EXPECT_EQ(at(m, 3, j), 255);
+    EXPECT_EQ(at(m, 4, j), 0);
+  }
+}
+
+TEST(RasterCoverage, ClippedAtGridBorder) {
+  const LayerContours layer = makeLayer({rect(-5, -5, 2.5, 100)});
+  const MaskImage m = coverage({{&layer, 1}}, unitGrid(4, 4));
+  for (uint32_t j = 0; j < 4; ++j) {
+    EXPECT_EQ(at(m, 0, j), 255);
+    EXPECT_EQ(at(m, 1, j), 255);
+    EXPECT_EQ(at(m, 2, j), 128);
+    EXPECT_EQ(at(m, 3, j), 0);
+  }
+}
+
+}  // namespace
+}  // namespace toposlice

@@ -134,7 +134,9 @@ TEST(SliceAnalytic, CanonicalLoopsStartAtLowestFacet) {
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const auto facets = layer.loopFacets(l);
       EXPECT_EQ(*std::min_element(facets.begin(), facets.end()), facets[0]);
-      if (l > 0) EXPECT_GT(facets[0], previous);
+      if (l > 0) {
+        EXPECT_GT(facets[0], previous);
+      }
       previous = facets[0];
     }
   }
@@ -157,7 +159,9 @@ TEST(SliceAnalytic, OpenMeshGivesOpenPolylines) {
   EXPECT_GT(stats.openPolylines, 0u);
   for (const auto& layer : layers)
     for (std::size_t l = 0; l < layer.loopCount(); ++l)
-      if (!layer.loopClosed[l]) EXPECT_GE(layer.loopPoints(l).size(), 2u);
+      if (!layer.loopClosed[l]) {
+        EXPECT_GE(layer.loopPoints(l).size(), 2u);
+      }
 }
 
 }  // namespace

@@ -91,8 +91,11 @@ TEST_P(SliceModels, AllMethodsAgreeAndLoopsAreValid) {
       EXPECT_EQ(signedArea(loop) > 0, outer) << "layer " << k << " loop " << l << " depth " << depth;
     }
   }
-  if (model.insideOut) EXPECT_LT(totalArea, 0.0);
-  else EXPECT_GT(totalArea, 0.0);
+  if (model.insideOut) {
+    EXPECT_LT(totalArea, 0.0);
+  } else {
+    EXPECT_GT(totalArea, 0.0);
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Shared, SliceModels, ::testing::ValuesIn(kClosedModels),
