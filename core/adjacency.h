@@ -3,7 +3,8 @@
 // adjacency[3 i + j] is the facet across edge j of facet i (the edge opposite corner j, running corner
 // j+1 -> corner j+2), or -1 where there is no single such facet: a boundary edge (one facet), a
 // non-manifold edge (three or more facets), an edge two facets traverse in the same direction
-// (inconsistent orientation) or a degenerate edge (both ends the same vertex). The table is symmetric:
+// (inconsistent orientation), and every edge of a degenerate facet (a repeated vertex: it has no area,
+// is left out of the table and counted, so its neighbours pair up across it). The table is symmetric:
 // if adjacency[3i+j] = k then adjacency[3k+m] = i for the m naming the same edge in k.
 #pragma once
 
@@ -18,7 +19,7 @@ struct EdgeStats {
   uint64_t boundary = 0;      // used by one facet
   uint64_t nonManifold = 0;   // used by three or more facets
   uint64_t inconsistent = 0;  // used by two facets in the same direction
-  uint64_t degenerate = 0;    // facet edges whose two ends are the same vertex
+  uint64_t degenerateFacets = 0;  // facets with a repeated vertex: skipped, all their entries -1
 };
 
 // Builds the table from welded facet-vertex indices (3 per facet, all < vertexCount) in expected linear

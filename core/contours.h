@@ -54,6 +54,16 @@ struct LayerContours {
   friend bool operator==(const LayerContours&, const LayerContours&) = default;
 };
 
+// Scratch for canonicalizeLayer (kept between layers to avoid allocations).
+struct CanonicalScratch {
+  std::vector<uint32_t> loopMin, order;
+  LayerContours sorted;
+};
+
+// Puts a layer's loops into canonical form: each closed loop rotated to start at its lowest facet index
+// (first occurrence), open polylines left as they run, and loops ordered by their lowest facet index.
+void canonicalizeLayer(LayerContours& layer, CanonicalScratch& scratch);
+
 // Signed area of a closed polygon (shoelace); positive for counter-clockwise seen from +z.
 double signedArea(std::span<const Point2d> loop);
 

@@ -35,6 +35,14 @@ inline unsigned aboveMask(const Point3f* corners, double z) {
 
 inline bool crossesPlane(unsigned mask) { return mask != 0 && mask != 7; }
 
+// A facet with two equal corners (bitwise, -0.0 == +0.0) has no area and no direction: it is skipped by
+// every slicing path and by the adjacency table, and counted. (After welding, these are exactly the
+// facets with a repeated vertex index.)
+inline bool isDegenerateFacet(const Point3f* c) {
+  auto same = [](const Point3f& a, const Point3f& b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
+  return same(c[0], c[1]) || same(c[1], c[2]) || same(c[0], c[2]);
+}
+
 // Down edge (above -> below) and up edge (below -> above) for each crossing mask; index 0 and 7 unused.
 inline constexpr uint8_t kDownEdge[8] = {0, 2, 0, 0, 1, 2, 1, 0};
 inline constexpr uint8_t kUpEdge[8] = {0, 1, 2, 1, 0, 0, 2, 0};

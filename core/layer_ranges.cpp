@@ -2,12 +2,19 @@
 
 #include <algorithm>
 
+#include "core/crossing.h"
+
 namespace toposlice {
 
 void computeFacetLayerRange(std::span<const Point3f> corners, std::span<const double> planes, std::size_t begin,
                             std::size_t end, std::span<uint32_t> first, std::span<uint32_t> last) {
   for (std::size_t f = begin; f < end; ++f) {
     const Point3f* c = &corners[3 * f];
+    if (isDegenerateFacet(c)) {  // crosses nothing
+      first[f] = static_cast<uint32_t>(planes.size());
+      last[f] = UINT32_MAX;
+      continue;
+    }
     const double zmin = std::min({c[0].z, c[1].z, c[2].z});
     const double zmax = std::max({c[0].z, c[1].z, c[2].z});
     const auto lo = std::upper_bound(planes.begin(), planes.end(), zmin);  // first plane > zmin

@@ -4,6 +4,7 @@
 // crosses the contiguous layer range first[f]..last[f]: first = the first plane above zmin, last = the
 // last plane at or below zmax (an empty range when first > last). Found by binary search on the planes,
 // so any ascending plane list works and no floating-point layer formula can disagree with the rule.
+// Degenerate facets (two equal corners, crossing.h) get an empty range: no path slices them.
 #pragma once
 
 #include <cstdint>

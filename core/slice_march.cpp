@@ -66,43 +66,9 @@ uint32_t marchLayer(std::span<const Point3f> corners, std::span<const int32_t> a
   return openCount;
 }
 
-namespace {
-
-// Puts a layer into canonical form given each loop's lowest facet index.
-void canonicalize(MarchScratch& scratch, LayerContours& out) {
-  const std::size_t loops = out.loopCount();
-  for (std::size_t l = 0; l < loops; ++l) {
-    if (!out.loopClosed[l]) continue;
-    const uint32_t b = out.loopOffsets[l], e = out.loopOffsets[l + 1];
-    uint32_t at = b;
-    while (out.facets[at] != scratch.loopMin[l]) ++at;
-    if (at == b) continue;
-    std::rotate(out.points.begin() + b, out.points.begin() + at, out.points.begin() + e);
-    std::rotate(out.facets.begin() + b, out.facets.begin() + at, out.facets.begin() + e);
-  }
-  auto& order = scratch.order;
-  order.resize(loops);
-  for (std::size_t l = 0; l < loops; ++l) order[l] = static_cast<uint32_t>(l);
-  const auto& key = scratch.loopMin;
-  if (std::is_sorted(key.begin(), key.begin() + static_cast<std::ptrdiff_t>(loops))) return;
-  std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return key[a] < key[b]; });
-  LayerContours& sorted = scratch.sorted;
-  sorted.clear(out.z);
-  for (const uint32_t l : order) {
-    const uint32_t b = out.loopOffsets[l], e = out.loopOffsets[l + 1];
-    sorted.points.insert(sorted.points.end(), out.points.begin() + b, out.points.begin() + e);
-    sorted.facets.insert(sorted.facets.end(), out.facets.begin() + b, out.facets.begin() + e);
-    sorted.endLoop(out.loopClosed[l] != 0);
-  }
-  std::swap(sorted, out);
-}
-
-}  // namespace
-
 uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const uint32_t> active, double z,
                            uint32_t mark, MarchScratch& scratch, LayerContours& out) {
   out.clear(z);
-  scratch.loopMin.clear();
   const float zf = planeAsFloat(z);
   uint32_t* stamp = scratch.stamp.data();
   const MarchFacet* rec = records.data();
@@ -111,14 +77,12 @@ uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const 
   for (const uint32_t start : active) {
     if (stamp[start] == mark) continue;
     uint32_t q = start;
-    uint32_t lowest = UINT32_MAX;
     bool closed = false;
     for (;;) {
       stamp[q] = mark;
       const MarchFacet& r = rec[q];
       const unsigned mask = aboveMaskF(r.corner, zf);
       out.addPoint(edgeCrossing(r.corner, kDownEdge[mask], z), r.id);
-      lowest = std::min(lowest, r.id);
       const int32_t next = r.next[kUpEdge[mask]];
       if (next == static_cast<int32_t>(start)) {
         closed = true;
@@ -149,7 +113,6 @@ uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const 
           const MarchFacet& rb = rec[scratch.backward[n - 1 - i]];
           pts[i] = edgeCrossing(rb.corner, kDownEdge[aboveMaskF(rb.corner, zf)], z);
           ids[i] = rb.id;
-          lowest = std::min(lowest, rb.id);
         }
         out.points.insert(out.points.begin() + static_cast<std::ptrdiff_t>(loopBegin), pts.begin(), pts.end());
         out.facets.insert(out.facets.begin() + static_cast<std::ptrdiff_t>(loopBegin), ids.begin(), ids.end());
@@ -157,9 +120,8 @@ uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const 
       ++openCount;
     }
     out.endLoop(closed);
-    scratch.loopMin.push_back(lowest);
   }
-  canonicalize(scratch, out);
+  canonicalizeLayer(out, scratch.canonical);
   return openCount;
 }
 

@@ -26,9 +26,7 @@ namespace toposlice {
 struct MarchScratch {
   std::vector<uint32_t> stamp;
   std::vector<uint32_t> backward;  // facets found walking backwards from an open polyline's start
-  std::vector<uint32_t> loopMin;   // per loop: lowest facet index (record kernel)
-  std::vector<uint32_t> order;     // loop permutation (record kernel)
-  LayerContours sorted;            // reordered copy of a layer (record kernel)
+  CanonicalScratch canonical;      // record kernel: putting loops in canonical order
   void prepare(std::size_t facetCount) {
     if (stamp.size() != facetCount) stamp.assign(facetCount, 0);
   }

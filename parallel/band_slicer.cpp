@@ -60,13 +60,15 @@ SliceStats sliceLazy(std::span<const Point3f> corners, std::span<const int32_t> 
   std::vector<int32_t> table(startTable.begin(), startTable.end());
   if (table.empty()) table.assign(corners.size(), -1);
   LazySlicer slicer(corners, table, settings.joinTolerance);
+  GapScratch gapScratch;
   ActiveFacets active;
   LayerContours out;
   const auto count = static_cast<uint32_t>(planes.size());
   for (uint32_t k = 0; k < count; ++k) {
     if (k == 0) active.start(layers, 0);
     else active.advance(layers);
-    slicer.sliceLayer(active.facets(), planes[k], k, out);
+    if (slicer.sliceLayer(active.facets(), planes[k], k, out) > 0 && settings.closeGaps > 0)
+      stats.gaps += closeGaps(out, settings.closeGaps, gapScratch);
     consume(k, out);
     countLayer(out, stats);
     if (progress && (k % 64 == 63 || k + 1 == count)) {
@@ -111,7 +113,9 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t>
     ActiveRecords records;
     MarchScratch march;
     ClosestScratch closest;
+    GapScratch gapScratch;
     std::vector<LayerContours> out;
+    std::vector<GapStats> gaps;
   };
   std::vector<Slot> slotData(slots);
   SliceStats stats;
@@ -124,8 +128,10 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t>
         const auto k0 = static_cast<uint32_t>(b * band);
         const uint32_t k1 = std::min(layerCount, k0 + band);
         slot.out.resize(band);
+        slot.gaps.assign(band, GapStats{});
         for (uint32_t k = k0; k < k1; ++k) {
           LayerContours& out = slot.out[k - k0];
+          uint32_t open = 0;
           if (march) {
             if (k == k0) {
               slot.march.prepare(marchMesh.facets.size());
@@ -133,12 +139,14 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t>
             } else {
               slot.records.advance(marchMesh);
             }
-            marchRecordsLayer(marchMesh.facets, slot.records.records(), planes[k], k + 1, slot.march, out);
+            open = marchRecordsLayer(marchMesh.facets, slot.records.records(), planes[k], k + 1, slot.march, out);
           } else {
             if (k == k0) slot.active.start(layers, k0);
             else slot.active.advance(layers);
-            closestPointLayer(corners, slot.active.facets(), planes[k], tolerance2, slot.closest, out);
+            open = closestPointLayer(corners, slot.active.facets(), planes[k], tolerance2, slot.closest, out);
           }
+          if (open > 0 && settings.closeGaps > 0)
+            slot.gaps[k - k0] = closeGaps(out, settings.closeGaps, slot.gapScratch);
         }
       },
       [&](std::size_t b, std::size_t s) {
@@ -148,6 +156,7 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t>
         for (uint32_t k = k0; k < k1; ++k) {
           consume(k, slotData[s].out[k - k0]);
           countLayer(slotData[s].out[k - k0], stats);
+          stats.gaps += slotData[s].gaps[k - k0];
         }
         if (progress) {
           progress->update(k1, layerCount);

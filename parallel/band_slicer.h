@@ -9,6 +9,7 @@
 #include <span>
 #include <string>
 
+#include "core/close_gaps.h"
 #include "core/contours.h"
 #include "core/mesh.h"
 #include "core/progress.h"
@@ -26,11 +27,13 @@ struct SliceSettings {
   SliceMethod method = SliceMethod::SelfReuse;
   uint32_t bandLayers = 0;       // layers per band; 0 picks a size from the layer and thread counts
   double joinTolerance = 1e-5;   // mm; cp and sr-lazy join segment ends closer than this
+  double closeGaps = 0.05;       // mm; open polylines (defective meshes) are bridged up to this gap; 0: off
 };
 
 struct SliceStats {
   uint64_t layers = 0, segments = 0, loops = 0, openPolylines = 0;
   LazyStats lazy;
+  GapStats gaps;
   bool cancelled = false;
 };
 

@@ -99,8 +99,8 @@ TEST_P(SliceModels, AllMethodsAgreeAndLoopsAreValid) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Shared, SliceModels, ::testing::ValuesIn(kClosedModels),
-                         [](const ::testing::TestParamInfo<ClosedModel>& info) {
-                           std::string name = info.param.file;
+                         [](const ::testing::TestParamInfo<ClosedModel>& param) {
+                           std::string name = param.param.file;
                            for (char& c : name)
                              if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
                            return name;

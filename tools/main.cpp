@@ -91,7 +91,8 @@ int runInfo(const std::string& model) {
   std::printf("facets         : %zu\n", soup.facetCount());
   std::printf("vertices       : %zu (welded)\n", mesh.vertices.size());
   printBox(boundsOf(soup.corners));
-  std::printf("volume         : %.6f mm^3%s\n", volume, volume < 0 ? " (negative: the mesh is inside out)" : "");
+  std::printf("volume         : %.6f mm^3%s\n", volume,
+              volume < 0 ? " (negative: the mesh is inside out; slice with --fix-orientation)" : "");
   std::printf("surface area   : %.6f mm^2\n", surfaceArea(soup.corners));
   std::printf("shells         : %llu\n",
               static_cast<unsigned long long>(countShells(mesh.facetVertices, mesh.vertices.size())));
@@ -100,9 +101,10 @@ int runInfo(const std::string& model) {
   std::printf("non-manifold   : %llu edges\n", static_cast<unsigned long long>(edges.nonManifold));
   std::printf("inconsistent   : %llu edges (two facets in the same direction)\n",
               static_cast<unsigned long long>(edges.inconsistent));
-  std::printf("degenerate     : %llu facet edges with both ends on one vertex\n",
-              static_cast<unsigned long long>(edges.degenerate));
-  const bool closed = edges.boundary == 0 && edges.nonManifold == 0 && edges.inconsistent == 0;
+  std::printf("degenerate     : %llu facets with a repeated corner (skipped when slicing)\n",
+              static_cast<unsigned long long>(edges.degenerateFacets));
+  const bool closed =
+      edges.boundary == 0 && edges.nonManifold == 0 && edges.inconsistent == 0 && edges.degenerateFacets == 0;
   std::printf("closed         : %s\n", closed ? "yes (every edge has exactly two facets, consistently oriented)" : "no");
   return 0;
 }
@@ -114,6 +116,14 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
     std::printf("defects    : %llu boundary, %llu non-manifold, %llu inconsistent edges\n",
                 static_cast<unsigned long long>(r.edges.boundary), static_cast<unsigned long long>(r.edges.nonManifold),
                 static_cast<unsigned long long>(r.edges.inconsistent));
+  // Every repair, per kind, so nothing is changed silently.
+  std::printf("repairs    : %llu degenerate facets skipped; %llu gaps bridged (<= %g mm) closing %llu loops, "
+              "%llu polylines left open; orientation %s\n",
+              static_cast<unsigned long long>(r.degenerateFacets), static_cast<unsigned long long>(r.stats.gaps.joins),
+              options.slice.closeGaps, static_cast<unsigned long long>(r.stats.gaps.closedLoops),
+              static_cast<unsigned long long>(r.stats.openPolylines),
+              r.flipped ? "flipped (the mesh was inside out)"
+                        : (r.inverted ? "INSIDE OUT (negative volume; use --fix-orientation)" : "ok"));
   std::printf("layers     : %llu, %llu segments, %llu loops, %llu open polylines\n",
               static_cast<unsigned long long>(r.stats.layers), static_cast<unsigned long long>(r.stats.segments),
               static_cast<unsigned long long>(r.stats.loops), static_cast<unsigned long long>(r.stats.openPolylines));
@@ -188,6 +198,9 @@ int run(int argc, char** argv) {
   slice->add_option("--band-layers", options.slice.bandLayers, "Layers per parallel band (default: automatic)");
   slice->add_option("--join-tolerance", options.slice.joinTolerance,
                     "mm; cp and sr-lazy join segment ends this close (default 1e-5)");
+  slice->add_option("--close-gaps", options.slice.closeGaps,
+                    "mm; bridge open contour ends of defective meshes up to this gap (default 0.05, 0: off)");
+  slice->add_flag("--fix-orientation", options.fixOrientation, "Flip an inside-out mesh (negative volume)");
   slice->add_flag("-f,--force", options.overwrite, "Overwrite existing outputs");
 
   CLI::App* templ = app.add_subcommand("template", "Save a template's adjacency table for its customized variants");

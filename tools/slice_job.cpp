@@ -5,6 +5,7 @@
 #include <chrono>
 #include <memory>
 
+#include "core/crossing.h"
 #include "core/mesh_info.h"
 #include "core/variant_check.h"
 #include "core/weld.h"
@@ -57,10 +58,17 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
                            const ProgressContext* progress) {
   SliceJobResult result;
   auto start = std::chrono::steady_clock::now();
-  const FacetSoup soup = readStl(model);
+  FacetSoup soup = readStl(model);
   result.readSeconds = secondsSince(start);
   result.facets = soup.facetCount();
   result.bounds = boundsOf(soup.corners);
+  result.volume = signedVolume(soup.corners);
+  result.inverted = result.volume < 0;
+  if (result.inverted && options.fixOrientation) {
+    for (std::size_t c = 0; c < soup.corners.size(); c += 3) std::swap(soup.corners[c + 1], soup.corners[c + 2]);
+    result.flipped = true;
+  }
+  for (std::size_t c = 0; c < soup.corners.size(); c += 3) result.degenerateFacets += isDegenerateFacet(&soup.corners[c]);
 
   start = std::chrono::steady_clock::now();
   std::vector<int32_t> built;

@@ -26,6 +26,7 @@ struct SliceJobOptions {
   bool overwrite = false;
   const TemplateTable* templateTable = nullptr;  // intra-model reuse: skip welding and adjacency
   bool rebuildOnMismatch = false;                // a variant that does not match: rebuild instead of failing
+  bool fixOrientation = false;                   // flip every facet of an inside-out (negative volume) mesh
 };
 
 struct SliceJobResult {
@@ -33,6 +34,9 @@ struct SliceJobResult {
   BoundingBox bounds;
   std::string topology;  // how the adjacency was obtained, for the summary
   EdgeStats edges;       // when built here
+  uint64_t degenerateFacets = 0;  // skipped
+  double volume = 0;              // signed, before any fix
+  bool inverted = false, flipped = false;
   double readSeconds = 0, topologySeconds = 0, sliceSeconds = 0;
   SliceStats stats;
   std::vector<std::filesystem::path> written;
