@@ -1,0 +1,550 @@
+#include "io/stl_reader.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+#include <zlib.h>
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <charconv>
+#include <climits>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <string_view>
+#include <system_error>
+
+#include "io/errors.h"
+
+namespace toposlice {
+namespace {
+
+static_assert(sizeof(Point3f) == 12, "Point3f must be three packed floats");
+
+constexpr std::size_t kBinaryHeaderBytes = 80;
+constexpr std::size_t kBinaryPrefixBytes = 84;  // header + uint32 facet count
+constexpr std::size_t kBinaryFacetBytes = 50;   // normal, 3 corners (12 floats), uint16 attribute
+
+[[noreturn]] void fail(const std::string& name, const std::string& what) {
+  throw InputError(name + ": " + what);
+}
+
+// A byte buffer that is not zero-filled on allocation (it is always overwritten).
+struct ByteBuffer {
+  std::unique_ptr<std::byte[]> data;
+  std::size_t size = 0;
+  std::size_t capacity = 0;
+
+  void reserveExactly(std::size_t newCapacity) {
+    auto grown = std::make_unique_for_overwrite<std::byte[]>(newCapacity);
+    if (size > 0) std::memcpy(grown.get(), data.get(), size);
+    data = std::move(grown);
+    capacity = newCapacity;
+  }
+  std::span<const std::byte> view() const { return {data.get(), size}; }
+};
+
+inline uint32_t loadLe32(const std::byte* p) {
+  uint32_t v;
+  std::memcpy(&v, p, 4);
+  if constexpr (std::endian::native == std::endian::big) {
+    v = (v >> 24) | ((v >> 8) & 0xFF00u) | ((v << 8) & 0xFF0000u) | (v << 24);
+  }
+  return v;
+}
+
+inline bool isSpace(char c) {
+  return c == ' ' || (c >= '\t' && c <= '\r');
+}
+
+// ---------------------------------------------------------------------------------------------------
+// File and gzip layers.
+
+ByteBuffer readWholeFile(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) fail(name, "cannot open: " + std::generic_category().message(errno));
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  struct stat info {};
+  if (::fstat(fd, &info) != 0) fail(name, "cannot stat: " + std::generic_category().message(errno));
+  if (S_ISDIR(info.st_mode)) fail(name, "is a directory");
+
+  ByteBuffer buffer;
+  // One byte more than a regular file's size, so the read that sees the end needs no growth.
+  const std::size_t expected = S_ISREG(info.st_mode) ? static_cast<std::size_t>(info.st_size) : 0;
+  buffer.reserveExactly(std::max<std::size_t>(expected + 1, 4096));
+  for (;;) {
+    if (buffer.size == buffer.capacity) buffer.reserveExactly(buffer.capacity * 2);
+    const ssize_t got = ::read(fd, buffer.data.get() + buffer.size, buffer.capacity - buffer.size);
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      fail(name, "read error: " + std::generic_category().message(errno));
+    }
+    if (got == 0) break;
+    buffer.size += static_cast<std::size_t>(got);
+  }
+  return buffer;
+}
+
+bool isGzip(std::span<const std::byte> bytes) {
+  return bytes.size() >= 2 && bytes[0] == std::byte{0x1F} && bytes[1] == std::byte{0x8B};
+}
+
+// Inflates one or more concatenated gzip members, on demand, into caller-owned memory.
+class GzipReader {
+ public:
+  GzipReader(std::span<const std::byte> in, const std::string& name) : in_(in), name_(name) {
+    if (inflateInit2(&stream_, 16 + MAX_WBITS) != Z_OK) fail(name_, "cannot initialise zlib");
+  }
+  ~GzipReader() { inflateEnd(&stream_); }
+  GzipReader(const GzipReader&) = delete;
+  GzipReader& operator=(const GzipReader&) = delete;
+
+  // The last member's ISIZE trailer (the uncompressed size mod 2^32), capped by deflate's maximum
+  // ratio so that a forged trailer cannot force a huge allocation. A hint only.
+  std::size_t sizeHint() const {
+    if (in_.size() < 18) return 0;
+    const std::size_t maxBytes = in_.size() <= SIZE_MAX / 1100 ? in_.size() * 1100 : SIZE_MAX / 2;
+    return std::min<std::size_t>(loadLe32(in_.data() + in_.size() - 4), maxBytes);
+  }
+
+  // Fills out[0, size); returns fewer bytes only at the end of the stream.
+  std::size_t read(std::byte* out, std::size_t size) {
+    std::size_t done = 0;
+    while (done < size && !finished_) {
+      if (stream_.avail_in == 0 && fed_ < in_.size()) {
+        const std::size_t chunk = std::min<std::size_t>(in_.size() - fed_, UINT_MAX);
+        // zlib's API is not const-correct; it never writes through next_in.
+        stream_.next_in = const_cast<Bytef*>(reinterpret_cast<const Bytef*>(in_.data() + fed_));
+        stream_.avail_in = static_cast<uInt>(chunk);
+        fed_ += chunk;
+      }
+      const auto room = static_cast<uInt>(std::min<std::size_t>(size - done, UINT_MAX));
+      stream_.next_out = reinterpret_cast<Bytef*>(out + done);
+      stream_.avail_out = room;
+      const int rc = inflate(&stream_, Z_NO_FLUSH);
+      done += room - stream_.avail_out;
+      if (rc == Z_STREAM_END) {
+        const std::size_t rest = stream_.avail_in + (in_.size() - fed_);
+        if (rest == 0) {
+          finished_ = true;
+        } else if (isGzip(in_.subspan(in_.size() - rest))) {
+          inflateReset(&stream_);  // the next member of a multi-member file
+        } else {
+          fail(name_, "corrupt gzip stream: " + std::to_string(rest) + " unexpected bytes after its end");
+        }
+      } else if (rc == Z_BUF_ERROR) {
+        // No progress with room to write: the input ran out before the end of the stream.
+        if (stream_.avail_in == 0 && fed_ == in_.size()) fail(name_, "truncated gzip stream");
+      } else if (rc == Z_MEM_ERROR) {
+        fail(name_, "out of memory while decompressing gzip");
+      } else if (rc != Z_OK) {
+        fail(name_, std::string("corrupt gzip stream: ") + (stream_.msg ? stream_.msg : "invalid data"));
+      }
+    }
+    return done;
+  }
+
+  // The whole (remaining) stream, in one buffer sized from the trailer.
+  ByteBuffer readAll() {
+    ByteBuffer out;
+    out.reserveExactly(std::max<std::size_t>(sizeHint() + 1, 4096));
+    for (;;) {
+      const std::size_t room = out.capacity - out.size;
+      const std::size_t got = read(out.data.get() + out.size, room);
+      out.size += got;
+      if (got < room) return out;
+      out.reserveExactly(out.capacity * 2);
+    }
+  }
+
+ private:
+  z_stream stream_{};
+  std::span<const std::byte> in_;
+  const std::string& name_;
+  std::size_t fed_ = 0;  // bytes of in_ handed to zlib so far
+  bool finished_ = false;
+};
+
+// ---------------------------------------------------------------------------------------------------
+// Binary STL.
+
+std::string headerName(const std::byte* header) {
+  std::string_view title(reinterpret_cast<const char*>(header), kBinaryHeaderBytes);
+  title = title.substr(0, title.find('\0'));
+  while (!title.empty() && isSpace(title.back())) title.remove_suffix(1);
+  while (!title.empty() && isSpace(title.front())) title.remove_prefix(1);
+  return std::string(title);
+}
+
+// Appends the corners of `count` 50-byte facet records; true when any coordinate is NaN or infinite.
+// The vector grows a batch at a time, so its zero-fill and the copy touch memory while it is in cache.
+bool appendBinaryFacets(const std::byte* records, std::size_t count, std::vector<Point3f>& corners) {
+  constexpr std::size_t kBatch = 2048;
+  bool anyNonFinite = false;
+  for (std::size_t first = 0; first < count; first += kBatch) {
+    const std::size_t batch = std::min(kBatch, count - first);
+    const std::size_t at = corners.size();
+    corners.resize(at + 3 * batch);
+    Point3f* out = corners.data() + at;
+    const std::byte* record = records + first * kBinaryFacetBytes;
+    for (std::size_t f = 0; f < batch; ++f, record += kBinaryFacetBytes, out += 3) {
+      const std::byte* corner = record + 12;  // skip the normal
+      uint32_t bits[9];
+      for (int k = 0; k < 9; ++k) {
+        bits[k] = loadLe32(corner + 4 * k);
+        anyNonFinite |= (bits[k] & 0x7F800000u) == 0x7F800000u;
+      }
+      for (int c = 0; c < 3; ++c) {
+        out[c] = {std::bit_cast<float>(bits[3 * c]), std::bit_cast<float>(bits[3 * c + 1]),
+                  std::bit_cast<float>(bits[3 * c + 2])};
+      }
+    }
+  }
+  return anyNonFinite;
+}
+
+[[noreturn]] void failFirstNonFinite(const std::vector<Point3f>& corners, const std::string& name) {
+  std::size_t i = 0;
+  while (i + 1 < corners.size() && std::isfinite(corners[i].x) && std::isfinite(corners[i].y) &&
+         std::isfinite(corners[i].z)) {
+    ++i;
+  }
+  fail(name, "facet " + std::to_string(i / 3) + ": non-finite coordinate (NaN or infinity)");
+}
+
+// `bytes` is exactly 84 + 50 * facetCount long.
+void parseBinary(std::span<const std::byte> bytes, uint32_t facetCount, const std::string& name,
+                 StlSource& source, FacetSoup& soup) {
+  source.binary = true;
+  source.solidName = headerName(bytes.data());
+  if (facetCount == 0) fail(name, "contains no facets");
+  soup.corners.reserve(std::size_t{facetCount} * 3);
+  if (appendBinaryFacets(bytes.data() + kBinaryPrefixBytes, facetCount, soup.corners)) {
+    failFirstNonFinite(soup.corners, name);
+  }
+}
+
+// A gzip-compressed binary STL, decompressed a cache-sized chunk at a time straight into the soup
+// (no buffer for the whole file). Only tried when the trailer's size says binary; returns false when the
+// stream's real length is not 84 + 50 * count, and the caller then reads the stream the general way.
+bool streamGzipBinary(std::span<const std::byte> bytes, const std::string& name, StlSource& source,
+                      FacetSoup& soup) {
+  GzipReader reader(bytes, name);
+  std::byte prefix[kBinaryPrefixBytes];
+  if (reader.read(prefix, kBinaryPrefixBytes) < kBinaryPrefixBytes) return false;
+  const uint32_t facetCount = loadLe32(prefix + kBinaryHeaderBytes);
+  if (facetCount == 0 || reader.sizeHint() != kBinaryPrefixBytes + uint64_t{kBinaryFacetBytes} * facetCount) {
+    return false;
+  }
+  constexpr std::size_t kChunkFacets = 2048;  // 100 KiB
+  auto chunk = std::make_unique_for_overwrite<std::byte[]>(kChunkFacets * kBinaryFacetBytes);
+  soup.corners.reserve(std::size_t{facetCount} * 3);
+  bool anyNonFinite = false;
+  for (std::size_t done = 0; done < facetCount;) {
+    const std::size_t want = std::min<std::size_t>(kChunkFacets, facetCount - done);
+    const std::size_t got = reader.read(chunk.get(), want * kBinaryFacetBytes);
+    if (got < want * kBinaryFacetBytes) return false;  // shorter than the count says
+    anyNonFinite |= appendBinaryFacets(chunk.get(), want, soup.corners);
+    done += want;
+  }
+  std::byte extra;
+  if (reader.read(&extra, 1) != 0) return false;  // longer than the count says
+  source.binary = true;
+  source.solidName = headerName(prefix);
+  if (anyNonFinite) failFirstNonFinite(soup.corners, name);
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// ASCII STL.
+
+// Whitespace-separated tokens over [begin, end), with the 1-based line of the last token returned.
+class Lexer {
+ public:
+  Lexer(const char* begin, const char* end) : p_(begin), end_(end) {}
+
+  // The next token, or an empty view at the end of the text.
+  std::string_view next() {
+    skipSpace();
+    tokenLine_ = line_;
+    const char* start = p_;
+    while (p_ < end_ && !isSpace(*p_)) ++p_;
+    return {start, static_cast<std::size_t>(p_ - start)};
+  }
+
+  // Consumes the case-insensitive word `lower` if the text continues with it (after whitespace),
+  // even when other characters follow it directly ("solidname").
+  bool consumePrefix(std::string_view lower) {
+    skipSpace();
+    tokenLine_ = line_;
+    if (static_cast<std::size_t>(end_ - p_) < lower.size()) return false;
+    for (std::size_t i = 0; i < lower.size(); ++i) {
+      if ((p_[i] | 0x20) != lower[i]) return false;
+    }
+    p_ += lower.size();
+    return true;
+  }
+
+  // The rest of the current line, trimmed; the line feed is left for the next token.
+  std::string_view restOfLine() {
+    const char* start = p_;
+    while (p_ < end_ && *p_ != '\n') ++p_;
+    std::string_view rest(start, static_cast<std::size_t>(p_ - start));
+    while (!rest.empty() && isSpace(rest.front())) rest.remove_prefix(1);
+    while (!rest.empty() && isSpace(rest.back())) rest.remove_suffix(1);
+    return rest;
+  }
+
+  bool atEnd() {
+    skipSpace();
+    return p_ == end_;
+  }
+  std::size_t line() const { return tokenLine_; }
+
+ private:
+  void skipSpace() {
+    while (p_ < end_ && isSpace(*p_)) {
+      line_ += *p_ == '\n';
+      ++p_;
+    }
+  }
+
+  const char* p_;
+  const char* end_;
+  std::size_t line_ = 1;
+  std::size_t tokenLine_ = 1;
+};
+
+// Keywords are letters only, so OR-ing 0x20 folds case without matching any non-letter.
+inline bool isKeyword(std::string_view token, std::string_view lower) {
+  if (token.size() != lower.size()) return false;
+  for (std::size_t i = 0; i < token.size(); ++i) {
+    if ((token[i] | 0x20) != lower[i]) return false;
+  }
+  return true;
+}
+
+enum class NumberRead { kOk, kNotANumber, kOutOfRange };
+
+// Float text as std::from_chars reads it (nan and inf included), with an optional leading '+'.
+// Values below float's range round to 0 or a subnormal; values above it are kOutOfRange.
+NumberRead readFloat(std::string_view token, float& value) {
+  const char* begin = token.data();
+  const char* end = begin + token.size();
+  if (token.size() > 1 && token[0] == '+' && token[1] != '-') ++begin;
+  const auto [ptr, ec] = std::from_chars(begin, end, value);
+  if (ptr != end || begin == end) return NumberRead::kNotANumber;
+  if (ec == std::errc()) return NumberRead::kOk;
+  if (ec != std::errc::result_out_of_range) return NumberRead::kNotANumber;
+  double wide = 0;
+  const auto [widePtr, wideEc] = std::from_chars(begin, end, wide);
+  if (wideEc != std::errc() || widePtr != end || std::abs(wide) > std::numeric_limits<float>::max()) {
+    return NumberRead::kOutOfRange;
+  }
+  value = static_cast<float>(wide);
+  return NumberRead::kOk;
+}
+
+// A token quoted for an error message: at most 32 characters, non-printable bytes as '?'.
+std::string quoted(std::string_view token) {
+  if (token.empty()) return "end of file";
+  std::string text = "'";
+  for (std::size_t i = 0; i < token.size() && i < 32; ++i) {
+    const char c = token[i];
+    text += c >= ' ' && c <= '~' ? c : '?';
+  }
+  if (token.size() > 32) text += "...";
+  return text + "'";
+}
+
+class AsciiParser {
+ public:
+  AsciiParser(std::string_view text, const std::string& name)
+      : lexer_(text.data(), text.data() + text.size()), name_(name) {}
+
+  void parse(StlSource& source, FacetSoup& soup, std::size_t textBytes) {
+    // A facet takes 250 bytes in common writers' output, 90 at the least.
+    soup.corners.reserve(3 * (textBytes / 192 + 1));
+    bool first = true;
+    while (true) {
+      if (!lexer_.consumePrefix("solid")) {
+        failAtLine("expected 'solid', found " + quoted(lexer_.next()));
+      }
+      const std::string_view solidName = lexer_.restOfLine();
+      if (first) source.solidName.assign(solidName);
+      first = false;
+      if (!parseFacets(soup)) return;  // end of file without endsolid
+      lexer_.restOfLine();             // the endsolid name is ignored
+      if (lexer_.atEnd()) return;
+    }
+  }
+
+ private:
+  // Reads facets up to endsolid (true) or the end of the text (false).
+  bool parseFacets(FacetSoup& soup) {
+    for (;;) {
+      const std::string_view token = lexer_.next();
+      if (token.empty()) return false;
+      if (isKeyword(token, "endsolid")) return true;
+      if (!isKeyword(token, "facet")) {
+        failInFacet("expected 'facet' or 'endsolid', found " + quoted(token));
+      }
+      parseFacet(soup);
+    }
+  }
+
+  // After the "facet" keyword: normal, loop of vertices, endfacet. Appends 3 corners.
+  void parseFacet(FacetSoup& soup) {
+    const std::size_t facetLine = lexer_.line();
+    expectKeyword("normal");
+    for (int k = 0; k < 3; ++k) {
+      const std::string_view token = lexer_.next();
+      float ignored;
+      if (readFloat(token, ignored) == NumberRead::kNotANumber) {
+        failInFacet("'facet normal' needs 3 numbers, found " + quoted(token));
+      }
+    }
+    expectKeyword("outer");
+    expectKeyword("loop");
+    Point3f corners[3];
+    std::size_t vertexCount = 0;
+    for (;;) {
+      const std::string_view token = lexer_.next();
+      if (isKeyword(token, "endloop")) break;
+      if (!isKeyword(token, "vertex")) failInFacet("expected 'vertex' or 'endloop', found " + quoted(token));
+      Point3f p;
+      p.x = readCoordinate();
+      p.y = readCoordinate();
+      p.z = readCoordinate();
+      if (vertexCount < 3) corners[vertexCount] = p;
+      ++vertexCount;
+    }
+    if (vertexCount != 3) {
+      fail(name_, "facet " + std::to_string(facetIndex_) + " (line " + std::to_string(facetLine) +
+                      "): " + std::to_string(vertexCount) + " vertices, expected 3");
+    }
+    expectKeyword("endfacet");
+    soup.corners.push_back(corners[0]);
+    soup.corners.push_back(corners[1]);
+    soup.corners.push_back(corners[2]);
+    ++facetIndex_;
+  }
+
+  float readCoordinate() {
+    const std::string_view token = lexer_.next();
+    float value = 0;
+    switch (readFloat(token, value)) {
+      case NumberRead::kOk:
+        if (!std::isfinite(value)) failInFacet("non-finite coordinate " + quoted(token));
+        return value;
+      case NumberRead::kOutOfRange:
+        failInFacet("coordinate out of float range " + quoted(token));
+      case NumberRead::kNotANumber:
+        break;
+    }
+    failInFacet("expected a coordinate, found " + quoted(token));
+  }
+
+  void expectKeyword(std::string_view lower) {
+    const std::string_view token = lexer_.next();
+    if (!isKeyword(token, lower)) {
+      failInFacet("expected '" + std::string(lower) + "', found " + quoted(token));
+    }
+  }
+
+  [[noreturn]] void failInFacet(const std::string& what) const {
+    fail(name_,
+         "facet " + std::to_string(facetIndex_) + " (line " + std::to_string(lexer_.line()) + "): " + what);
+  }
+  [[noreturn]] void failAtLine(const std::string& what) const {
+    fail(name_, "line " + std::to_string(lexer_.line()) + ": " + what);
+  }
+
+  Lexer lexer_;
+  const std::string& name_;
+  std::size_t facetIndex_ = 0;
+};
+
+std::size_t byteOrderMarkSize(std::string_view text) {
+  return text.starts_with("\xEF\xBB\xBF") ? 3 : 0;
+}
+
+bool startsWithSolid(std::string_view text) {
+  if (text.size() < 5) return false;
+  for (std::size_t i = 0; i < 5; ++i) {
+    if ((text[i] | 0x20) != "solid"[i]) return false;
+  }
+  return true;
+}
+
+FacetSoup parseUncompressed(std::span<const std::byte> bytes, const std::string& name, StlSource& source) {
+  if (bytes.empty()) fail(name, "empty file");
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  FacetSoup soup;
+
+  uint64_t binaryBytes = 0;
+  uint32_t facetCount = 0;
+  if (bytes.size() >= kBinaryPrefixBytes) {
+    facetCount = loadLe32(bytes.data() + kBinaryHeaderBytes);
+    binaryBytes = kBinaryPrefixBytes + uint64_t{kBinaryFacetBytes} * facetCount;
+    if (binaryBytes == bytes.size()) {
+      parseBinary(bytes, facetCount, name, source, soup);
+      return soup;
+    }
+  }
+
+  const std::string_view afterMark = text.substr(byteOrderMarkSize(text));
+  std::size_t start = 0;
+  while (start < afterMark.size() && isSpace(afterMark[start])) ++start;
+  if (start == afterMark.size()) fail(name, "empty file (only whitespace)");
+  // ASCII STL never holds a NUL byte; a "solid" header padded with NULs is a binary file.
+  const bool nulInPrefix = text.substr(0, kBinaryPrefixBytes).find('\0') != std::string_view::npos;
+  if (startsWithSolid(afterMark.substr(start)) && !nulInPrefix) {
+    AsciiParser(afterMark, name).parse(source, soup, text.size());  // counts the leading lines too
+    if (soup.corners.empty()) fail(name, "contains no facets");
+    return soup;
+  }
+
+  if (bytes.size() < kBinaryPrefixBytes) {
+    fail(name, "not an STL file: " + std::to_string(bytes.size()) +
+                   " bytes, too short for a binary STL, and not ASCII text starting with 'solid'");
+  }
+  const std::string counts = "expected " + std::to_string(facetCount) + " facets (" +
+                             std::to_string(binaryBytes) + " bytes), file has " +
+                             std::to_string(bytes.size()) + " bytes";
+  if (bytes.size() < binaryBytes) {
+    fail(name, "truncated: " + counts + " (binary facet count does not match the file length)");
+  }
+  fail(name, "binary facet count does not match the file length: " + counts);
+}
+
+}  // namespace
+
+FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, StlSource* source) {
+  StlSource local;
+  StlSource& out = source ? *source : local;
+  out = StlSource{};
+  if (isGzip(bytes)) {
+    out.gzip = true;
+    FacetSoup soup;
+    if (streamGzipBinary(bytes, name, out, soup)) return soup;
+    const ByteBuffer inflated = GzipReader(bytes, name).readAll();
+    return parseUncompressed(inflated.view(), name, out);
+  }
+  return parseUncompressed(bytes, name, out);
+}
+
+FacetSoup readStl(const std::filesystem::path& path, StlSource* source) {
+  const ByteBuffer file = readWholeFile(path);
+  return parseStl(file.view(), path.string(), source);
+}
+
+}  // namespace toposlice
