@@ -1,0 +1,245 @@
+#include "io/cli_writer.h"
+
+#include <bit>
+#include <cassert>
+#include <charconv>
+#include <climits>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <type_traits>
+
+#include "io/output_file.h"
+
+// Source: Common Layer Interface (CLI) specification, version 2.00, binary section, cross-checked against
+// independent CLI readers: commands are uint16, "start layer long" = 127 (real z), "start polyline long"
+// = 130 (int32 id, dir, n, then n pairs of reals); integers and IEEE-754 float32 reals are little-endian;
+// binary data starts right after "$$HEADEREND". dir: 0 clockwise (internal), 1 counter-clockwise
+// (external), 2 open line, seen looking down the z axis.
+
+namespace toposlice {
+namespace {
+
+constexpr uint16_t kCmdLayerLong = 127;
+constexpr uint16_t kCmdPolylineLong = 130;
+constexpr int32_t kPartId = 1;
+constexpr int32_t kDirHole = 0;   // clockwise seen from +z
+constexpr int32_t kDirOuter = 1;  // counter-clockwise seen from +z
+constexpr int32_t kDirOpen = 2;
+constexpr int kDecimals = 6;
+// Longest fixed-notation double with kDecimals decimals: sign, 309 digits, point, decimals.
+constexpr std::size_t kMaxFixedChars = 1 + 309 + 1 + kDecimals;
+
+// Growable byte buffer without zero-filling; reused from layer to layer.
+class ByteBuffer {
+ public:
+  char* data() { return data_.get(); }
+  std::size_t size() const { return size_; }
+  void clear() { size_ = 0; }
+  // Makes room for `extra` more bytes and returns where they go.
+  char* reserveMore(std::size_t extra) {
+    if (size_ + extra > capacity_) grow(size_ + extra);
+    return data_.get() + size_;
+  }
+  void setEnd(char* end) { size_ = static_cast<std::size_t>(end - data_.get()); }
+  void append(std::string_view s) {
+    std::memcpy(reserveMore(s.size()), s.data(), s.size());
+    size_ += s.size();
+  }
+  void append(char c) {
+    *reserveMore(1) = c;
+    ++size_;
+  }
+  void appendInt(int64_t v) {
+    char* p = reserveMore(24);
+    setEnd(std::to_chars(p, p + 24, v).ptr);
+  }
+  // Fixed notation, kDecimals decimals; a value that rounds to zero is written without a minus sign.
+  void appendFixed(double v) {
+    char* p = reserveMore(kMaxFixedChars);
+    char* end = std::to_chars(p, p + kMaxFixedChars, v, std::chars_format::fixed, kDecimals).ptr;
+    if (*p == '-' && v > -1e-6) {
+      bool zero = true;
+      for (const char* c = p + 1; c < end; ++c) zero = zero && (*c == '0' || *c == '.');
+      if (zero) {
+        std::memmove(p, p + 1, static_cast<std::size_t>(end - p - 1));
+        --end;
+      }
+    }
+    setEnd(end);
+  }
+
+ private:
+  void grow(std::size_t need) {
+    std::size_t capacity = capacity_ < (std::size_t{1} << 16) ? (std::size_t{1} << 16) : capacity_ * 2;
+    if (capacity < need) capacity = need;
+    auto bigger = std::make_unique_for_overwrite<char[]>(capacity);
+    if (size_ > 0) std::memcpy(bigger.get(), data_.get(), size_);
+    data_ = std::move(bigger);
+    capacity_ = capacity;
+  }
+  std::unique_ptr<char[]> data_;
+  std::size_t capacity_ = 0;
+  std::size_t size_ = 0;
+};
+
+template <typename T>
+char* storeLE(char* p, T value) {
+  static_assert(sizeof(T) == 2 || sizeof(T) == 4);
+  if constexpr (std::endian::native == std::endian::little) {
+    std::memcpy(p, &value, sizeof(T));
+  } else {
+    using U = std::conditional_t<sizeof(T) == 2, uint16_t, uint32_t>;
+    const U bits = std::bit_cast<U>(value);
+    for (std::size_t i = 0; i < sizeof(T); ++i) p[i] = static_cast<char>((bits >> (8 * i)) & 0xFFu);
+  }
+  return p + sizeof(T);
+}
+
+int32_t loopDir(const LayerContours& layer, std::size_t l) {
+  if (!layer.loopClosed[l]) return kDirOpen;
+  return signedArea(layer.loopPoints(l)) > 0 ? kDirOuter : kDirHole;
+}
+
+// Header text: printable ASCII only; '/' and '$' (CLI comment and command markers) become '_'.
+std::string sanitizeLabel(const std::string& name) {
+  std::string out;
+  for (const char c : name) {
+    const bool printable = c >= 0x20 && c < 0x7f && c != '/' && c != '$';
+    out.push_back(printable ? c : '_');
+  }
+  return out.empty() ? std::string("part") : out;
+}
+
+void appendHeader(ByteBuffer& buf, const ContourJob& job, bool binary) {
+  buf.append("$$HEADERSTART\n");
+  buf.append(binary ? "$$BINARY\n" : "$$ASCII\n");
+  buf.append("$$UNITS/00000001.000000\n");
+  buf.append("$$VERSION/200\n");
+  buf.append("$$LABEL/");
+  buf.appendInt(kPartId);
+  buf.append(',');
+  buf.append(sanitizeLabel(job.name));
+  buf.append("\n$$DIMENSION/");
+  const float dims[6] = {job.bounds.min.x, job.bounds.min.y, job.bounds.min.z,
+                         job.bounds.max.x, job.bounds.max.y, job.bounds.max.z};
+  for (int i = 0; i < 6; ++i) {
+    if (i > 0) buf.append(',');
+    buf.appendFixed(static_cast<double>(dims[i]));
+  }
+  buf.append("\n$$LAYERS/");
+  buf.appendInt(job.layerCount);
+  buf.append("\n$$HEADEREND");
+  // Binary commands follow the header's last byte directly; ASCII continues with lines.
+  if (!binary) buf.append("\n$$GEOMETRYSTART\n");
+}
+
+class CliWriter final : public ContourSink {
+ public:
+  CliWriter(const std::filesystem::path& path, const ContourJob& job, bool binary, bool overwrite)
+      : file_(path, overwrite), binary_(binary), layerCount_(job.layerCount) {
+    appendHeader(buf_, job, binary_);
+    file_.write(buf_.data(), buf_.size());
+  }
+
+  void writeLayer(uint32_t index, const LayerContours& layer) override {
+    assert(index == nextLayer_ && index < layerCount_);
+    assert(layer.loopClosed.size() == layer.loopCount());
+    (void)index;
+    ++nextLayer_;
+    buf_.clear();
+    if (binary_) {
+      encodeBinary(layer);
+    } else {
+      encodeAscii(layer);
+    }
+    file_.write(buf_.data(), buf_.size());
+  }
+
+  void finish() override {
+    assert(nextLayer_ == layerCount_);
+    if (!binary_) file_.write("$$GEOMETRYEND\n", 14);
+    file_.commit();
+  }
+
+ private:
+  void encodeAscii(const LayerContours& layer) {
+    buf_.append("$$LAYER/");
+    buf_.appendFixed(layer.z);
+    buf_.append('\n');
+    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+      const auto pts = layer.loopPoints(l);
+      if (pts.empty()) continue;
+      const bool closed = layer.loopClosed[l] != 0;
+      buf_.append("$$POLYLINE/");
+      buf_.appendInt(kPartId);
+      buf_.append(',');
+      buf_.appendInt(loopDir(layer, l));
+      buf_.append(',');
+      buf_.appendInt(static_cast<int64_t>(pts.size() + (closed ? 1 : 0)));
+      for (const Point2d& q : pts) {
+        buf_.append(',');
+        buf_.appendFixed(q.x);
+        buf_.append(',');
+        buf_.appendFixed(q.y);
+      }
+      if (closed) {
+        buf_.append(',');
+        buf_.appendFixed(pts[0].x);
+        buf_.append(',');
+        buf_.appendFixed(pts[0].y);
+      }
+      buf_.append('\n');
+    }
+  }
+
+  // Sizes the whole layer first, then fills it in one pass.
+  void encodeBinary(const LayerContours& layer) {
+    constexpr std::size_t kLayerBytes = 2 + 4, kPolylineBytes = 2 + 3 * 4, kPointBytes = 2 * 4;
+    std::size_t bytes = kLayerBytes;
+    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+      const std::size_t n = layer.loopOffsets[l + 1] - layer.loopOffsets[l];
+      if (n > 0) bytes += kPolylineBytes + kPointBytes * (n + (layer.loopClosed[l] ? 1 : 0));
+    }
+    char* p = buf_.reserveMore(bytes);
+    char* const end = p + bytes;
+    p = storeLE(p, kCmdLayerLong);
+    p = storeLE(p, static_cast<float>(layer.z));
+    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+      const auto pts = layer.loopPoints(l);
+      if (pts.empty()) continue;
+      const bool closed = layer.loopClosed[l] != 0;
+      assert(pts.size() < static_cast<std::size_t>(INT32_MAX));
+      p = storeLE(p, kCmdPolylineLong);
+      p = storeLE(p, kPartId);
+      p = storeLE(p, loopDir(layer, l));
+      p = storeLE(p, static_cast<int32_t>(pts.size() + (closed ? 1 : 0)));
+      for (const Point2d& q : pts) {
+        p = storeLE(p, static_cast<float>(q.x));
+        p = storeLE(p, static_cast<float>(q.y));
+      }
+      if (closed) {
+        p = storeLE(p, static_cast<float>(pts[0].x));
+        p = storeLE(p, static_cast<float>(pts[0].y));
+      }
+    }
+    assert(p == end);
+    buf_.setEnd(end);
+  }
+
+  OutputFile file_;
+  bool binary_;
+  uint32_t layerCount_;
+  uint32_t nextLayer_ = 0;
+  ByteBuffer buf_;
+};
+
+}  // namespace
+
+std::unique_ptr<ContourSink> makeCliWriter(const std::filesystem::path& path, const ContourJob& job,
+                                           bool binary, bool overwrite) {
+  return std::make_unique<CliWriter>(path, job, binary, overwrite);
+}
+
+}  // namespace toposlice

@@ -1,0 +1,436 @@
+// CLI writer (ASCII text checked byte for byte, binary parsed back) and OutputFile (temporary name,
+// atomic commit, overwrite policy, cleanup on destruction, on write failure and on a signal).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <bit>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <vector>
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "core/contours.h"
+#include "io/cli_writer.h"
+#include "io/errors.h"
+#include "io/output_file.h"
+
+namespace toposlice {
+namespace {
+
+namespace fs = std::filesystem;
+
+// A fresh, empty directory per test, removed afterwards.
+class ScratchDir {
+ public:
+  ScratchDir() {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    path_ = fs::temp_directory_path() / ("toposlice_" + std::string(info->test_suite_name()) + "_" +
+                                         info->name() + "_" + std::to_string(::getpid()));
+    fs::remove_all(path_);
+    fs::create_directories(path_);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    fs::remove_all(path_, ec);
+  }
+  const fs::path& path() const { return path_; }
+  fs::path operator/(const std::string& name) const { return path_ / name; }
+  std::vector<std::string> entries() const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(path_)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+  }
+
+ private:
+  fs::path path_;
+};
+
+std::string readFile(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+void writeText(const fs::path& p, const std::string& text) {
+  std::ofstream out(p, std::ios::binary);
+  out << text;
+}
+
+// Layer 0: CCW square 0..10 with a CW square hole 3..7 and an open polyline; layer 1: a CCW triangle.
+std::vector<LayerContours> sampleLayers() {
+  std::vector<LayerContours> layers(2);
+  LayerContours& a = layers[0];
+  a.clear(0.025);
+  a.addPoint({0, 0}, 0);
+  a.addPoint({10, 0}, 1);
+  a.addPoint({10, 10}, 2);
+  a.addPoint({0, 10}, 3);
+  a.endLoop(true);
+  a.addPoint({3, 3}, 4);
+  a.addPoint({3, 7}, 5);
+  a.addPoint({7, 7}, 6);
+  a.addPoint({7, 3}, 7);
+  a.endLoop(true);
+  a.addPoint({1.25, -0.5}, 8);
+  a.addPoint({-1e-9, 0.125}, 9);  // rounds to zero: written without a minus sign
+  a.endLoop(false);
+  LayerContours& b = layers[1];
+  b.clear(0.075);
+  b.addPoint({0, 0}, 0);
+  b.addPoint({1, 0}, 1);
+  b.addPoint({0, 1}, 2);
+  b.endLoop(true);
+  return layers;
+}
+
+ContourJob sampleJob() {
+  ContourJob job;
+  job.name = "demo";
+  job.bounds.min = {0, 0, 0};
+  job.bounds.max = {10, 10, 0.1f};
+  job.layerCount = 2;
+  return job;
+}
+
+void writeSample(const fs::path& path, bool binary, bool overwrite = false) {
+  const auto layers = sampleLayers();
+  auto sink = makeCliWriter(path, sampleJob(), binary, overwrite);
+  for (uint32_t k = 0; k < layers.size(); ++k) sink->writeLayer(k, layers[k]);
+  sink->finish();
+}
+
+TEST(CliWriter, AsciiExact) {
+  ScratchDir dir;
+  writeSample(dir / "a.cli", false);
+  const std::string expected =
+      "$$HEADERSTART\n"
+      "$$ASCII\n"
+      "$$UNITS/00000001.000000\n"
+      "$$VERSION/200\n"
+      "$$LABEL/1,demo\n"
+      "$$DIMENSION/0.000000,0.000000,0.000000,10.000000,10.000000,0.100000\n"
+      "$$LAYERS/2\n"
+      "$$HEADEREND\n"
+      "$$GEOMETRYSTART\n"
+      "$$LAYER/0.025000\n"
+      "$$POLYLINE/1,1,5,0.000000,0.000000,10.000000,0.000000,10.000000,10.000000,0.000000,10.000000,"
+      "0.000000,0.000000\n"
+      "$$POLYLINE/1,0,5,3.000000,3.000000,3.000000,7.000000,7.000000,7.000000,7.000000,3.000000,"
+      "3.000000,3.000000\n"
+      "$$POLYLINE/1,2,2,1.250000,-0.500000,0.000000,0.125000\n"
+      "$$LAYER/0.075000\n"
+      "$$POLYLINE/1,1,4,0.000000,0.000000,1.000000,0.000000,0.000000,1.000000,0.000000,0.000000\n"
+      "$$GEOMETRYEND\n";
+  EXPECT_EQ(readFile(dir / "a.cli"), expected);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"a.cli"});
+}
+
+TEST(CliWriter, LabelIsSanitized) {
+  ScratchDir dir;
+  ContourJob job = sampleJob();
+  job.name = "a/b$c\nd";
+  job.layerCount = 0;
+  auto sink = makeCliWriter(dir / "l.cli", job, false, false);
+  sink->finish();
+  EXPECT_NE(readFile(dir / "l.cli").find("$$LABEL/1,a_b_c_d\n"), std::string::npos);
+}
+
+// Minimal binary CLI reader: header lines up to "$$HEADEREND", then commands 127 and 130 only.
+struct CliPolyline {
+  int32_t id = 0, dir = 0;
+  std::vector<float> xy;
+};
+struct CliLayer {
+  float z = 0;
+  std::vector<CliPolyline> polylines;
+};
+struct CliFile {
+  std::string header;
+  std::vector<CliLayer> layers;
+};
+
+template <typename T>
+T readLE(const std::string& bytes, std::size_t& pos) {
+  if (pos + sizeof(T) > bytes.size()) throw std::runtime_error("truncated binary CLI");
+  using U = std::conditional_t<sizeof(T) == 2, uint16_t, uint32_t>;
+  U bits = 0;
+  for (std::size_t i = 0; i < sizeof(T); ++i) {
+    bits = static_cast<U>(bits | (static_cast<U>(static_cast<unsigned char>(bytes[pos + i])) << (8 * i)));
+  }
+  pos += sizeof(T);
+  return std::bit_cast<T>(bits);
+}
+
+CliFile parseBinaryCli(const std::string& bytes) {
+  CliFile file;
+  const std::string end = "$$HEADEREND";
+  const std::size_t headerEnd = bytes.find(end);
+  if (headerEnd == std::string::npos) throw std::runtime_error("no $$HEADEREND");
+  file.header = bytes.substr(0, headerEnd + end.size());
+  std::size_t pos = headerEnd + end.size();
+  while (pos < bytes.size()) {
+    const uint16_t cmd = readLE<uint16_t>(bytes, pos);
+    if (cmd == 127) {
+      file.layers.push_back({readLE<float>(bytes, pos), {}});
+    } else if (cmd == 130) {
+      if (file.layers.empty()) throw std::runtime_error("polyline before the first layer");
+      CliPolyline poly;
+      poly.id = readLE<int32_t>(bytes, pos);
+      poly.dir = readLE<int32_t>(bytes, pos);
+      const int32_t n = readLE<int32_t>(bytes, pos);
+      for (int32_t i = 0; i < 2 * n; ++i) poly.xy.push_back(readLE<float>(bytes, pos));
+      file.layers.back().polylines.push_back(std::move(poly));
+    } else {
+      throw std::runtime_error("unknown command " + std::to_string(cmd));
+    }
+  }
+  return file;
+}
+
+TEST(CliWriter, BinaryRoundTrip) {
+  ScratchDir dir;
+  writeSample(dir / "b.cli", true);
+  const std::string bytes = readFile(dir / "b.cli");
+  const CliFile file = parseBinaryCli(bytes);
+  EXPECT_EQ(file.header,
+            "$$HEADERSTART\n$$BINARY\n$$UNITS/00000001.000000\n$$VERSION/200\n$$LABEL/1,demo\n"
+            "$$DIMENSION/0.000000,0.000000,0.000000,10.000000,10.000000,0.100000\n$$LAYERS/2\n$$HEADEREND");
+
+  const auto layers = sampleLayers();
+  ASSERT_EQ(file.layers.size(), layers.size());
+  for (std::size_t k = 0; k < layers.size(); ++k) {
+    const LayerContours& in = layers[k];
+    const CliLayer& out = file.layers[k];
+    EXPECT_EQ(out.z, static_cast<float>(in.z));
+    ASSERT_EQ(out.polylines.size(), in.loopCount());
+    for (std::size_t l = 0; l < in.loopCount(); ++l) {
+      const auto pts = in.loopPoints(l);
+      const CliPolyline& poly = out.polylines[l];
+      const bool closed = in.loopClosed[l] != 0;
+      EXPECT_EQ(poly.id, 1);
+      EXPECT_EQ(poly.dir, !closed ? 2 : (signedArea(pts) > 0 ? 1 : 0));
+      ASSERT_EQ(poly.xy.size(), 2 * (pts.size() + (closed ? 1 : 0)));
+      for (std::size_t i = 0; i < poly.xy.size() / 2; ++i) {
+        const Point2d& p = pts[i % pts.size()];  // a closed loop repeats its first point
+        EXPECT_EQ(poly.xy[2 * i], static_cast<float>(p.x));
+        EXPECT_EQ(poly.xy[2 * i + 1], static_cast<float>(p.y));
+      }
+    }
+  }
+  // Dirs of the sample: outer, hole, open; then outer.
+  EXPECT_EQ(file.layers[0].polylines[0].dir, 1);
+  EXPECT_EQ(file.layers[0].polylines[1].dir, 0);
+  EXPECT_EQ(file.layers[0].polylines[2].dir, 2);
+  // Exact size: header + per layer 6 bytes + per polyline 14 bytes + 8 per point.
+  EXPECT_EQ(bytes.size(), file.header.size() + 2 * 6 + 4 * 14 + 8 * (5 + 5 + 2 + 4));
+}
+
+TEST(CliWriter, Deterministic) {
+  ScratchDir dir;
+  for (const bool binary : {false, true}) {
+    writeSample(dir / "one.cli", binary, true);
+    writeSample(dir / "two.cli", binary, true);
+    EXPECT_EQ(readFile(dir / "one.cli"), readFile(dir / "two.cli")) << "binary=" << binary;
+  }
+}
+
+TEST(CliWriter, NothingUnderFinalNameBeforeFinish) {
+  ScratchDir dir;
+  const auto layers = sampleLayers();
+  for (const bool binary : {false, true}) {
+    const fs::path path = dir / "x.cli";
+    {
+      auto sink = makeCliWriter(path, sampleJob(), binary, false);
+      sink->writeLayer(0, layers[0]);
+      sink->writeLayer(1, layers[1]);
+      EXPECT_FALSE(fs::exists(path));
+      const auto names = dir.entries();
+      ASSERT_EQ(names.size(), 1u);
+      EXPECT_EQ(names[0].rfind("x.cli.tmp-" + std::to_string(::getpid()) + "-", 0), 0u) << names[0];
+      // Destroyed without finish(): the temporary goes away.
+    }
+    EXPECT_TRUE(dir.entries().empty());
+  }
+}
+
+TEST(CliWriter, ExistingFileNeedsOverwrite) {
+  ScratchDir dir;
+  const fs::path path = dir / "old.cli";
+  writeText(path, "old");
+  try {
+    makeCliWriter(path, sampleJob(), true, false);
+    FAIL() << "no OutputError";
+  } catch (const OutputError& e) {
+    EXPECT_EQ(std::string(e.what()), path.string() + ": already exists (use --force to overwrite)");
+  }
+  EXPECT_EQ(readFile(path), "old");
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"old.cli"});
+
+  const auto layers = sampleLayers();
+  auto sink = makeCliWriter(path, sampleJob(), false, true);
+  sink->writeLayer(0, layers[0]);
+  sink->writeLayer(1, layers[1]);
+  EXPECT_EQ(readFile(path), "old");  // replaced only by finish()
+  sink->finish();
+  EXPECT_EQ(readFile(path).rfind("$$HEADERSTART\n$$ASCII\n", 0), 0u);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"old.cli"});
+}
+
+TEST(OutputFile, CommitWritesAllBytes) {
+  ScratchDir dir;
+  std::string expected;
+  {
+    OutputFile file(dir / "f.bin", false);
+    EXPECT_FALSE(fs::exists(dir / "f.bin"));
+    EXPECT_TRUE(fs::exists(file.tempPath()));
+    // Small writes (buffered), one larger than the buffer (direct), and some crossing the buffer's end.
+    for (std::size_t size : {std::size_t{1}, std::size_t{1000}, OutputFile::kBufferSize + 17,
+                             OutputFile::kBufferSize - 5, std::size_t{4096}, std::size_t{3}}) {
+      std::string chunk(size, '\0');
+      for (std::size_t i = 0; i < size; ++i) chunk[i] = static_cast<char>('a' + (expected.size() + i) % 26);
+      file.write(chunk.data(), chunk.size());
+      expected += chunk;
+    }
+    EXPECT_EQ(file.bytesWritten(), expected.size());
+    file.commit();
+    EXPECT_TRUE(file.committed());
+    EXPECT_FALSE(fs::exists(file.tempPath()));
+  }
+  EXPECT_EQ(readFile(dir / "f.bin"), expected);
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"f.bin"});
+}
+
+TEST(OutputFile, DestructorRemovesTemporary) {
+  ScratchDir dir;
+  {
+    OutputFile file(dir / "f.bin", false);
+    file.write("abc", 3);
+    EXPECT_EQ(dir.entries().size(), 1u);
+  }
+  EXPECT_TRUE(dir.entries().empty());
+}
+
+TEST(OutputFile, TemporaryNamesAreUnique) {
+  ScratchDir dir;
+  OutputFile a(dir / "f.bin", true);
+  OutputFile b(dir / "f.bin", true);
+  EXPECT_NE(a.tempPath(), b.tempPath());
+  EXPECT_EQ(a.tempPath().parent_path(), dir.path());
+  a.write("a", 1);
+  b.write("b", 1);
+  a.commit();
+  b.commit();
+  EXPECT_EQ(readFile(dir / "f.bin"), "b");
+}
+
+TEST(OutputFile, RefusesExistingPath) {
+  ScratchDir dir;
+  writeText(dir / "f.bin", "keep");
+  EXPECT_THROW(OutputFile(dir / "f.bin", false), OutputError);
+  // A file that appears while writing is not clobbered either.
+  {
+    OutputFile file(dir / "g.bin", false);
+    file.write("new", 3);
+    writeText(dir / "g.bin", "other");
+    try {
+      file.commit();
+      FAIL() << "no OutputError";
+    } catch (const OutputError& e) {
+      EXPECT_EQ(std::string(e.what()),
+                (dir / "g.bin").string() + ": already exists (use --force to overwrite)");
+    }
+  }
+  EXPECT_EQ(readFile(dir / "f.bin"), "keep");
+  EXPECT_EQ(readFile(dir / "g.bin"), "other");
+  EXPECT_EQ(dir.entries(), (std::vector<std::string>{"f.bin", "g.bin"}));
+}
+
+TEST(OutputFile, ReportsCreateFailure) {
+  ScratchDir dir;
+  const fs::path path = dir / "missing" / "f.bin";
+  try {
+    OutputFile file(path, false);
+    FAIL() << "no OutputError";
+  } catch (const OutputError& e) {
+    const std::string what = e.what();
+    EXPECT_EQ(what.rfind(path.string() + ": cannot create ", 0), 0u) << what;
+    EXPECT_NE(what.find("No such file or directory"), std::string::npos) << what;
+  }
+}
+
+TEST(OutputFile, WriteFailureThrowsAndLeavesNothing) {
+  ScratchDir dir;
+  // A file size limit makes write(2) fail with EFBIG, standing in for a full disk.
+  rlimit old{};
+  ASSERT_EQ(::getrlimit(RLIMIT_FSIZE, &old), 0);
+  const auto oldHandler = std::signal(SIGXFSZ, SIG_IGN);
+  rlimit small = old;
+  small.rlim_cur = 1 << 20;
+  ASSERT_EQ(::setrlimit(RLIMIT_FSIZE, &small), 0);
+  bool threw = false;
+  {
+    OutputFile file(dir / "big.bin", false);
+    const std::string chunk(OutputFile::kBufferSize * 3, 'x');
+    try {
+      file.write(chunk.data(), chunk.size());
+      file.commit();
+    } catch (const OutputError& e) {
+      threw = true;
+      EXPECT_EQ(std::string(e.what()).rfind((dir / "big.bin").string() + ": cannot write: ", 0), 0u)
+          << e.what();
+    }
+    EXPECT_THROW(file.commit(), OutputError);  // a failed file cannot be committed
+  }
+  ::setrlimit(RLIMIT_FSIZE, &old);
+  std::signal(SIGXFSZ, oldHandler);
+  EXPECT_TRUE(threw);
+  EXPECT_TRUE(dir.entries().empty());
+}
+
+TEST(OutputFile, RemovePendingOutputsUnlinksLiveTemporaries) {
+  ScratchDir dir;
+  OutputFile done(dir / "done.bin", false);
+  done.write("d", 1);
+  done.commit();
+  OutputFile a(dir / "a.bin", false);
+  OutputFile b(dir / "b.bin", false);
+  EXPECT_EQ(dir.entries().size(), 3u);
+  removePendingOutputs();
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"done.bin"});
+}
+
+void removeOutputsAndDie(int sig) {
+  removePendingOutputs();
+  std::signal(sig, SIG_DFL);
+  std::raise(sig);
+}
+
+TEST(OutputFile, InterruptedRunLeavesNoTemporary) {
+  ScratchDir dir;
+  const pid_t child = ::fork();
+  ASSERT_GE(child, 0);
+  if (child == 0) {
+    std::signal(SIGTERM, removeOutputsAndDie);
+    try {
+      OutputFile file(dir / "f.bin", false);
+      file.write("partial", 7);
+      std::raise(SIGTERM);  // destructors never run: only the handler can clean up
+    } catch (...) {
+    }
+    ::_exit(3);
+  }
+  int status = 0;
+  ASSERT_EQ(::waitpid(child, &status, 0), child);
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << status;
+  EXPECT_TRUE(dir.entries().empty());
+}
+
+}  // namespace
+}  // namespace toposlice
