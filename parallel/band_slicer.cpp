@@ -53,24 +53,64 @@ FacetLayers facetLayersParallel(std::span<const Point3f> corners, std::span<cons
   return layers;
 }
 
-SliceStats sliceLazy(std::span<const Point3f> corners, std::span<const int32_t> startTable,
-                     std::span<const double> planes, const FacetLayers& layers, const SliceSettings& settings,
-                     const LayerConsumer& consume, const ProgressContext* progress) {
-  SliceStats stats;
-  std::vector<int32_t> table(startTable.begin(), startTable.end());
-  if (table.empty()) table.assign(corners.size(), -1);
-  LazySlicer slicer(corners, table, settings.joinTolerance);
-  GapScratch gapScratch;
+// One mesh's slicing state inside a band (or the whole run, for sr-lazy).
+struct MeshState {
+  FacetLayers layers;
+  MarchMesh march;                 // sr
+  std::vector<int32_t> lazyTable;  // sr-lazy
+};
+
+struct SlotMesh {
   ActiveFacets active;
-  LayerContours out;
+  ActiveRecords records;
+  MarchScratch march;
+  ClosestScratch closest;
+  GapScratch gaps;
+};
+
+// Slices layer k of one mesh into `out` (cp or sr; the band's first layer starts the sweep).
+uint32_t sliceBandLayer(const SliceMesh& mesh, const MeshState& state, SliceMethod method, uint32_t k, bool first,
+                        double z, double tolerance2, SlotMesh& slot, LayerContours& out) {
+  if (method == SliceMethod::SelfReuse) {
+    if (first) {
+      slot.march.prepare(state.march.facets.size());
+      slot.records.start(state.march, k);
+    } else {
+      slot.records.advance(state.march);
+    }
+    return marchRecordsLayer(state.march.facets, slot.records.records(), z, k + 1, slot.march, out);
+  }
+  if (first) slot.active.start(state.layers, k);
+  else slot.active.advance(state.layers);
+  return closestPointLayer(mesh.corners, slot.active.facets(), z, tolerance2, slot.closest, out);
+}
+
+SliceStats sliceLazy(std::span<const SliceMesh> meshes, std::vector<MeshState>& states, std::span<const double> planes,
+                     const SliceSettings& settings, const LayerStages& stages, const ProgressContext* progress) {
+  SliceStats stats;
+  std::vector<LazySlicer> slicers;
+  std::vector<ActiveFacets> active(meshes.size());
+  std::vector<GapScratch> gapScratch(meshes.size());
+  slicers.reserve(meshes.size());
+  for (std::size_t i = 0; i < meshes.size(); ++i) {
+    states[i].lazyTable.assign(meshes[i].adjacency.begin(), meshes[i].adjacency.end());
+    if (states[i].lazyTable.empty()) states[i].lazyTable.assign(meshes[i].corners.size(), -1);
+    slicers.emplace_back(meshes[i].corners, states[i].lazyTable, settings.joinTolerance);
+  }
+  std::vector<LayerContours> out(meshes.size());
   const auto count = static_cast<uint32_t>(planes.size());
   for (uint32_t k = 0; k < count; ++k) {
-    if (k == 0) active.start(layers, 0);
-    else active.advance(layers);
-    if (slicer.sliceLayer(active.facets(), planes[k], k, out) > 0 && settings.closeGaps > 0)
-      stats.gaps += closeGaps(out, settings.closeGaps, gapScratch);
-    consume(k, out);
-    countLayer(out, stats);
+    for (std::size_t i = 0; i < meshes.size(); ++i) {
+      if (k == 0) active[i].start(states[i].layers, 0);
+      else active[i].advance(states[i].layers);
+      GapStats gaps;
+      if (slicers[i].sliceLayer(active[i].facets(), planes[k], k, out[i]) > 0 && settings.closeGaps > 0)
+        gaps = closeGaps(out[i], settings.closeGaps, gapScratch[i]);
+      if (i == 0) stats.gaps += gaps;
+    }
+    if (stages.process) stages.process(k, out, 0, 0);
+    if (stages.consume) stages.consume(k, out, 0, 0);
+    countLayer(out[0], stats);
     if (progress && (k % 64 == 63 || k + 1 == count)) {
       progress->update(k + 1, count);
       if (progress->cancelled()) {
@@ -79,84 +119,90 @@ SliceStats sliceLazy(std::span<const Point3f> corners, std::span<const int32_t> 
       }
     }
   }
-  stats.lazy = slicer.stats();
+  stats.lazy = slicers[0].stats();
   return stats;
 }
 
 }  // namespace
 
-SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency, std::span<const double> planes,
-                      const SliceSettings& settings, const LayerConsumer& consume, const ProgressContext* progress) {
-  const FacetLayers layers = facetLayersParallel(corners, planes);
-  if (settings.method == SliceMethod::SelfReuseLazy)
-    return sliceLazy(corners, adjacency, planes, layers, settings, consume, progress);
-
-  const auto layerCount = static_cast<uint32_t>(planes.size());
+BandPlan planBands(std::size_t layerCount, const SliceSettings& settings) {
+  if (settings.method == SliceMethod::SelfReuseLazy) return {1, 1};
   const std::size_t threads = std::max(1u, ThreadLimit::available());
   uint32_t band = settings.bandLayers;
-  if (band == 0) band = std::clamp<uint32_t>(layerCount / static_cast<uint32_t>(threads * 8), 8, 128);
-  const std::size_t bands = (layerCount + band - 1) / band;
-  const std::size_t slots = std::min<std::size_t>(bands, 2 * threads);
-  const double tolerance2 = settings.joinTolerance * settings.joinTolerance;
+  if (band == 0) band = std::clamp<uint32_t>(static_cast<uint32_t>(layerCount / (threads * 8)), 8, 128);
+  const std::size_t bands = std::max<std::size_t>(1, (layerCount + band - 1) / band);
+  return {band, std::min<std::size_t>(bands, 2 * threads)};
+}
 
-  MarchMesh marchMesh;
-  const bool march = settings.method == SliceMethod::SelfReuse;
-  if (march) {
-    prepareMarchMesh(layers, corners.size() / 3, marchMesh);
-    parallelForChunks(marchMesh.facets.size(), 16384, [&](std::size_t begin, std::size_t end) {
-      fillMarchFacets(corners, adjacency, layers, begin, end, marchMesh);
-    });
+SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double> planes, const SliceSettings& settings,
+                       const LayerStages& stages, const ProgressContext* progress) {
+  std::vector<MeshState> states(meshes.size());
+  for (std::size_t i = 0; i < meshes.size(); ++i) states[i].layers = facetLayersParallel(meshes[i].corners, planes);
+  if (settings.method == SliceMethod::SelfReuseLazy)
+    return sliceLazy(meshes, states, planes, settings, stages, progress);
+
+  if (settings.method == SliceMethod::SelfReuse) {
+    for (std::size_t i = 0; i < meshes.size(); ++i) {
+      MeshState& state = states[i];
+      prepareMarchMesh(state.layers, meshes[i].corners.size() / 3, state.march);
+      parallelForChunks(state.march.facets.size(), 16384, [&](std::size_t begin, std::size_t end) {
+        fillMarchFacets(meshes[i].corners, meshes[i].adjacency, state.layers, begin, end, state.march);
+      });
+    }
   }
 
+  const auto layerCount = static_cast<uint32_t>(planes.size());
+  const BandPlan plan = planBands(layerCount, settings);
+  const uint32_t band = plan.bandLayers;
+  const std::size_t bands = (layerCount + band - 1) / band;
+  const std::size_t meshCount = meshes.size();
+  const double tolerance2 = settings.joinTolerance * settings.joinTolerance;
+
   struct Slot {
-    ActiveFacets active;
-    ActiveRecords records;
-    MarchScratch march;
-    ClosestScratch closest;
-    GapScratch gapScratch;
-    std::vector<LayerContours> out;
-    std::vector<GapStats> gaps;
+    std::vector<SlotMesh> mesh;
+    std::vector<LayerContours> out;  // [position * meshCount + mesh]
+    std::vector<GapStats> gaps;      // model's, per position
   };
-  std::vector<Slot> slotData(slots);
+  std::vector<Slot> slotData(plan.slots);
   SliceStats stats;
   std::atomic<bool> stop{false};
   orderedPipeline(
-      bands, slots,
+      bands, plan.slots,
       [&](std::size_t b, std::size_t s) {
-        Slot& slot = slotData[s];
         if (stop) return;
+        Slot& slot = slotData[s];
+        slot.mesh.resize(meshCount);
+        slot.out.resize(std::size_t{band} * meshCount);
+        slot.gaps.assign(band, GapStats{});
         const auto k0 = static_cast<uint32_t>(b * band);
         const uint32_t k1 = std::min(layerCount, k0 + band);
-        slot.out.resize(band);
-        slot.gaps.assign(band, GapStats{});
         for (uint32_t k = k0; k < k1; ++k) {
-          LayerContours& out = slot.out[k - k0];
-          uint32_t open = 0;
-          if (march) {
-            if (k == k0) {
-              slot.march.prepare(marchMesh.facets.size());
-              slot.records.start(marchMesh, k0);
-            } else {
-              slot.records.advance(marchMesh);
+          const uint32_t position = k - k0;
+          for (std::size_t i = 0; i < meshCount; ++i) {
+            LayerContours& out = slot.out[position * meshCount + i];
+            const uint32_t open = sliceBandLayer(meshes[i], states[i], settings.method, k, k == k0, planes[k],
+                                                 tolerance2, slot.mesh[i], out);
+            if (open > 0 && settings.closeGaps > 0) {
+              const GapStats gaps = closeGaps(out, settings.closeGaps, slot.mesh[i].gaps);
+              if (i == 0) slot.gaps[position] = gaps;
             }
-            open = marchRecordsLayer(marchMesh.facets, slot.records.records(), planes[k], k + 1, slot.march, out);
-          } else {
-            if (k == k0) slot.active.start(layers, k0);
-            else slot.active.advance(layers);
-            open = closestPointLayer(corners, slot.active.facets(), planes[k], tolerance2, slot.closest, out);
           }
-          if (open > 0 && settings.closeGaps > 0)
-            slot.gaps[k - k0] = closeGaps(out, settings.closeGaps, slot.gapScratch);
+          if (stages.process)
+            stages.process(k, std::span<const LayerContours>(slot.out).subspan(position * meshCount, meshCount), s,
+                           position);
         }
       },
       [&](std::size_t b, std::size_t s) {
         if (stop) return;
+        Slot& slot = slotData[s];
         const auto k0 = static_cast<uint32_t>(b * band);
         const uint32_t k1 = std::min(layerCount, k0 + band);
         for (uint32_t k = k0; k < k1; ++k) {
-          consume(k, slotData[s].out[k - k0]);
-          countLayer(slotData[s].out[k - k0], stats);
-          stats.gaps += slotData[s].gaps[k - k0];
+          const uint32_t position = k - k0;
+          const auto layer = std::span<const LayerContours>(slot.out).subspan(position * meshCount, meshCount);
+          if (stages.consume) stages.consume(k, layer, s, position);
+          countLayer(layer[0], stats);
+          stats.gaps += slot.gaps[position];
         }
         if (progress) {
           progress->update(k1, layerCount);
@@ -165,6 +211,16 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t>
       });
   stats.cancelled = stop.load();
   return stats;
+}
+
+SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency, std::span<const double> planes,
+                      const SliceSettings& settings, const LayerConsumer& consume, const ProgressContext* progress) {
+  const SliceMesh mesh{corners, adjacency};
+  LayerStages stages;
+  stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t, uint32_t) {
+    consume(k, layer[0]);
+  };
+  return sliceMeshes(std::span<const SliceMesh>(&mesh, 1), planes, settings, stages, progress);
 }
 
 }  // namespace toposlice

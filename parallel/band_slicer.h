@@ -48,4 +48,33 @@ SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t>
                       const SliceSettings& settings, const LayerConsumer& consume,
                       const ProgressContext* progress = nullptr);
 
+// Several meshes on one z grid (a model and its add-on / removal features, each with its own table),
+// with an optional parallel stage per layer (rasterize, encode) before the in-order consumer.
+struct SliceMesh {
+  std::span<const Point3f> corners;
+  std::span<const int32_t> adjacency;  // as for sliceModel
+};
+
+// The band size and number of pipeline slots sliceMeshes will use, so callers can size per-slot storage.
+struct BandPlan {
+  uint32_t bandLayers = 1;
+  std::size_t slots = 1;
+};
+BandPlan planBands(std::size_t layerCount, const SliceSettings& settings);
+
+struct LayerStages {
+  // Optional. Runs in parallel, once per layer, after every mesh of the layer is sliced. `meshes[i]` is
+  // mesh i's contours; `slot` < plan.slots and `position` < plan.bandLayers name storage the caller owns
+  // for this layer until its consume call (no other running call uses the same pair).
+  std::function<void(uint32_t layer, std::span<const LayerContours> meshes, std::size_t slot, uint32_t position)>
+      process;
+  // Runs in layer order from one thread at a time, with the same slot and position.
+  std::function<void(uint32_t layer, std::span<const LayerContours> meshes, std::size_t slot, uint32_t position)>
+      consume;
+};
+
+// Stats count the first mesh (the model) only; gaps are bridged in every mesh.
+SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double> planes, const SliceSettings& settings,
+                       const LayerStages& stages, const ProgressContext* progress = nullptr);
+
 }  // namespace toposlice

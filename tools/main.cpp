@@ -9,12 +9,14 @@
 
 #include "core/mesh_info.h"
 #include "core/planes.h"
+#include "core/printer.h"
 #include "core/weld.h"
 #include "io/errors.h"
 #include "io/output_file.h"
 #include "io/stl_reader.h"
 #include "io/template_file.h"
 #include "parallel/parallel.h"
+#include "tools/batch_command.h"
 #include "tools/progress_bar.h"
 #include "tools/slice_job.h"
 
@@ -135,6 +137,8 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
   std::printf("time       : read %.3f s, weld+adjacency %.3f s, slice%s %.3f s, total %.3f s\n", r.readSeconds,
               r.topologySeconds, r.written.empty() ? "" : "+write", r.sliceSeconds,
               r.readSeconds + r.topologySeconds + r.sliceSeconds);
+  if (!options.masks.output.empty() || !options.report.empty())
+    std::printf("resin      : %.4f ml\n", r.volumeMl);
   std::printf("peak memory: %.1f MiB\n", peakResidentMiB());
   for (const auto& path : r.written) std::printf("wrote      : %s\n", path.c_str());
 }
@@ -198,6 +202,23 @@ int run(int argc, char** argv) {
   slice->add_option("--band-layers", options.slice.bandLayers, "Layers per parallel band (default: automatic)");
   slice->add_option("--join-tolerance", options.slice.joinTolerance,
                     "mm; cp and sr-lazy join segment ends this close (default 1e-5)");
+  std::string resolution, origin;
+  slice->add_option("--contours", outputs, "Same as -o: contour output (.cli, .svg, .3mf)");
+  slice->add_option("--masks", options.masks.output,
+                    "Mask stack: .sl1 (Prusa SL1 zip of PNGs), .exr, .vdb, or a directory of PNGs");
+  slice->add_option("--printer", options.masks.printer, "Printer preset: " + printerNames());
+  slice->add_option("--pixel", options.masks.pixel, "Pixel size in mm (overrides the preset)");
+  slice->add_option("--resolution", resolution, "Image size WxH in pixels (overrides the preset)");
+  slice->add_option("--origin", origin, "X,Y of pixel (0,0)'s lower-left corner in mm (default: model centred)");
+  slice->add_flag("--mirror-x", options.masks.mirrorX, "Mirror the masks in x");
+  slice->add_flag("--mirror-y", options.masks.mirrorY, "Mirror the masks in y");
+  slice->add_flag("--antialias", options.masks.antialias, "Anti-aliased masks (covered fraction, 8-bit)");
+  slice->add_flag("--crop", options.masks.crop, "Allow a model larger than the image (cut off at its edges)");
+  std::vector<std::string> addFeatures, removeFeatures;
+  slice->add_option("--add", addFeatures, "Add-on feature mesh, sliced on its own (repeatable)");
+  slice->add_option("--remove", removeFeatures, "Removal feature mesh, subtracted at the winding stage (repeatable)");
+  std::string reportPath;
+  slice->add_option("--report", reportPath, "Per-layer CSV report: z, area, loops, islands; resin volume");
   slice->add_option("--close-gaps", options.slice.closeGaps,
                     "mm; bridge open contour ends of defective meshes up to this gap (default 0.05, 0: off)");
   slice->add_flag("--fix-orientation", options.fixOrientation, "Flip an inside-out mesh (negative volume)");
@@ -210,7 +231,11 @@ int run(int argc, char** argv) {
   templ->add_option("-o,--output", templateOut, "Table file to write (.topo)")->required();
   templ->add_flag("-f,--force", templateForce, "Overwrite an existing table");
 
-  for (CLI::App* sub : {info, slice, templ}) addCommon(sub, common);
+  CLI::App* batch = app.add_subcommand("batch", "Slice every variant of a batch job with one template table");
+  std::string jobPath;
+  batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
+
+  for (CLI::App* sub : {info, slice, templ, batch}) addCommon(sub, common);
 
   try {
     app.parse(argc, argv);
@@ -224,9 +249,27 @@ int run(int argc, char** argv) {
   try {
     if (*info) return runInfo(model);
     if (*templ) return runTemplate(model, templateOut, templateForce, common.quiet);
+    if (*batch) return runBatch(jobPath, BatchRunOptions{common.quiet});
     options.planes = planeSpec(planes);
     parseSliceMethod(method, options.slice.method);
     for (const auto& o : outputs) options.outputs.emplace_back(o);
+    for (const auto& f : addFeatures) options.add.emplace_back(f);
+    for (const auto& f : removeFeatures) options.remove.emplace_back(f);
+    options.report = reportPath;
+    if (!resolution.empty()) {
+      unsigned w = 0, h = 0;
+      char extra = 0;
+      if (std::sscanf(resolution.c_str(), "%ux%u%c", &w, &h, &extra) != 2 || w == 0 || h == 0)
+        throw InputError("--resolution '" + resolution + "': expected WxH, e.g. 2560x1440");
+      options.masks.resolution = std::pair<uint32_t, uint32_t>{w, h};
+    }
+    if (!origin.empty()) {
+      double x = 0, y = 0;
+      char extra = 0;
+      if (std::sscanf(origin.c_str(), "%lf,%lf%c", &x, &y, &extra) != 2)
+        throw InputError("--origin '" + origin + "': expected X,Y in mm");
+      options.masks.origin = std::pair<double, double>{x, y};
+    }
     options.rebuildOnMismatch = onMismatch == "rebuild";
     TemplateTable table;
     if (!templatePath.empty()) {

@@ -2,14 +2,22 @@
 
 #include <sys/resource.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <memory>
 
 #include "core/crossing.h"
 #include "core/mesh_info.h"
 #include "core/variant_check.h"
 #include "core/weld.h"
+#include "core/mask_runs.h"
+#include "core/printer.h"
+#include "core/rasterize.h"
 #include "io/cli_writer.h"
+#include "io/layer_report.h"
+#include "io/mask_png.h"
+#include "io/mask_sink.h"
 #include "io/errors.h"
 #include "io/stl_reader.h"
 #include "io/svg_writer.h"
@@ -46,33 +54,18 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
   return sinks;
 }
 
-}  // namespace
 
-double peakResidentMiB() {
-  rusage usage{};
-  getrusage(RUSAGE_SELF, &usage);
-  return static_cast<double>(usage.ru_maxrss) / 1024.0;
+void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats = nullptr) {
+  const IndexedMesh mesh = weldCorners(soup.corners);
+  table.resize(soup.corners.size());
+  const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
+  if (stats) *stats = s;
 }
 
-SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
-                           const ProgressContext* progress) {
-  SliceJobResult result;
-  auto start = std::chrono::steady_clock::now();
-  FacetSoup soup = readStl(model);
-  result.readSeconds = secondsSince(start);
-  result.facets = soup.facetCount();
-  result.bounds = boundsOf(soup.corners);
-  result.volume = signedVolume(soup.corners);
-  result.inverted = result.volume < 0;
-  if (result.inverted && options.fixOrientation) {
-    for (std::size_t c = 0; c < soup.corners.size(); c += 3) std::swap(soup.corners[c + 1], soup.corners[c + 2]);
-    result.flipped = true;
-  }
-  for (std::size_t c = 0; c < soup.corners.size(); c += 3) result.degenerateFacets += isDegenerateFacet(&soup.corners[c]);
-
-  start = std::chrono::steady_clock::now();
-  std::vector<int32_t> built;
-  std::span<const int32_t> adjacency;
+// The model's adjacency: loaded from a verified template, built, or none (cp / sr-lazy discover it).
+std::span<const int32_t> modelTopology(const std::filesystem::path& model, const FacetSoup& soup,
+                                       const SliceJobOptions& options, SliceJobResult& result,
+                                       std::vector<int32_t>& built) {
   const SliceMethod method = options.slice.method;
   bool build = method == SliceMethod::SelfReuse;
   if (options.templateTable != nullptr && method != SliceMethod::ClosestPoint) {
@@ -86,29 +79,106 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       mismatch = checkVariantConnectivity(soup.corners, table.adjacency);
     }
     if (!mismatch) {
-      adjacency = table.adjacency;
-      build = false;
       result.topology = "loaded from template (connectivity verified)";
-    } else {
-      std::string where = mismatch->reason;
-      if (mismatch->facet != kNoIndex)
-        where = "facet " + std::to_string(mismatch->facet) + " edge " + std::to_string(mismatch->edge) +
-                " (neighbour " + std::to_string(mismatch->neighbour) + "): " + mismatch->reason;
-      if (!options.rebuildOnMismatch)
-        throw InputError(model.string() + ": does not share the template's connectivity: " + where);
-      result.topology = "template mismatch (" + where + "), rebuilt";
-      build = method == SliceMethod::SelfReuse;
+      return table.adjacency;
     }
+    std::string where = mismatch->reason;
+    if (mismatch->facet != kNoIndex)
+      where = "facet " + std::to_string(mismatch->facet) + " edge " + std::to_string(mismatch->edge) +
+              " (neighbour " + std::to_string(mismatch->neighbour) + "): " + mismatch->reason;
+    if (!options.rebuildOnMismatch)
+      throw InputError(model.string() + ": does not share the template's connectivity: " + where);
+    result.topology = "template mismatch (" + where + "), rebuilt";
   }
   if (build) {
-    const IndexedMesh mesh = weldCorners(soup.corners);
-    built.resize(soup.corners.size());
-    result.edges = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), built);
-    adjacency = built;
+    buildTable(soup, built, &result.edges);
     if (result.topology.empty()) result.topology = "built (weld + adjacency)";
-  } else if (result.topology.empty()) {
-    result.topology = method == SliceMethod::ClosestPoint ? "none (closest point)" : "discovered while slicing";
+    return built;
   }
+  if (result.topology.empty())
+    result.topology = method == SliceMethod::ClosestPoint ? "none (closest point)" : "discovered while slicing";
+  return {};
+}
+
+// Thickness of layer k: h for uniform planes; for an explicit list, half the distance between the
+// neighbouring planes (one-sided at the ends).
+double layerThickness(const std::vector<double>& planes, uint32_t k, const PlaneSpec& spec) {
+  if (spec.explicitZ.empty() && planes.size() >= 2) return planes[1] - planes[0];
+  if (planes.size() < 2) return spec.layerHeight.value_or(0.0);
+  const std::size_t lo = k == 0 ? 0 : k - 1, hi = std::min<std::size_t>(planes.size() - 1, k + 1);
+  return (planes[hi] - planes[lo]) / static_cast<double>(hi - lo);
+}
+
+MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::string& name,
+                    const std::vector<double>& planes) {
+  MaskJob job;
+  job.name = name;
+  uint32_t width = 0, height = 0;
+  double pixel = 0;
+  if (!o.printer.empty()) {
+    const auto preset = findPrinter(o.printer);
+    if (!preset) throw InputError("unknown printer '" + o.printer + "' (known: " + printerNames() + ")");
+    width = preset->width;
+    height = preset->height;
+    pixel = preset->pixel;
+    job.printerModel = preset->model;
+  }
+  if (o.resolution) std::tie(width, height) = *o.resolution;
+  if (o.pixel) pixel = *o.pixel;
+  if (width == 0 || height == 0)
+    throw InputError("masks need an image size: give --printer (" + printerNames() + ") or --resolution WxH");
+  if (!(pixel > 0)) throw InputError("masks need a positive pixel size: give --pixel MM");
+  job.grid = placeGrid(extent, width, height, pixel, o.origin, o.mirrorX, o.mirrorY);
+  const double overhang = gridOverhang(extent, job.grid);
+  if (overhang > 0 && !o.crop) {
+    char text[256];
+    std::snprintf(text, sizeof text,
+                  "the model does not fit the %ux%u image at %g mm pixels (%.3f x %.3f mm): it sticks out by "
+                  "%.3f mm (use --crop to cut it off, a smaller model or larger pixels)",
+                  width, height, pixel, width * pixel, height * pixel, overhang);
+    throw InputError(text);
+  }
+  job.layerHeight = planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
+  job.layerCount = static_cast<uint32_t>(planes.size());
+  job.antiAliased = o.antialias;
+  return job;
+}
+
+}  // namespace
+
+double peakResidentMiB() {
+  rusage usage{};
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) / 1024.0;
+}
+
+SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
+                           const ProgressContext* progress) {
+  SliceJobResult result;
+  auto start = std::chrono::steady_clock::now();
+  FacetSoup soup = readStl(model);
+  std::vector<FacetSoup> features;  // add-ons first, then removals
+  for (const auto* list : {&options.add, &options.remove})
+    for (const auto& path : *list) features.push_back(readStl(path));
+  result.readSeconds = secondsSince(start);
+  result.facets = soup.facetCount();
+  result.bounds = boundsOf(soup.corners);
+  result.volume = signedVolume(soup.corners);
+  result.inverted = result.volume < 0;
+  if (result.inverted && options.fixOrientation) {
+    for (std::size_t c = 0; c < soup.corners.size(); c += 3) std::swap(soup.corners[c + 1], soup.corners[c + 2]);
+    result.flipped = true;
+  }
+  for (std::size_t c = 0; c < soup.corners.size(); c += 3) result.degenerateFacets += isDegenerateFacet(&soup.corners[c]);
+
+  start = std::chrono::steady_clock::now();
+  const SliceMethod method = options.slice.method;
+  std::vector<int32_t> built;
+  std::span<const int32_t> adjacency = modelTopology(model, soup, options, result, built);
+  // Features are separate meshes with their own tables; the template's table is never touched.
+  std::vector<std::vector<int32_t>> featureTables(features.size());
+  if (method == SliceMethod::SelfReuse)
+    for (std::size_t i = 0; i < features.size(); ++i) buildTable(features[i], featureTables[i]);
   result.topologySeconds = secondsSince(start);
 
   std::string error;
@@ -122,16 +192,98 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   job.layerCount = static_cast<uint32_t>(planes.size());
   auto sinks = openContourSinks(options, job);
 
+  // Masks: grid, sink, and per-slot rasterizer state.
+  const bool masks = !options.masks.output.empty();
+  MaskJob maskJob;
+  std::unique_ptr<MaskSink> maskSink;
+  if (masks) {
+    BoundingBox extent = result.bounds;
+    for (std::size_t i = 0; i < options.add.size(); ++i) {
+      const BoundingBox b = boundsOf(features[i].corners);
+      extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
+      extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
+    }
+    maskJob = makeMaskJob(options.masks, extent, job.name, planes);
+    maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
+  }
+  std::unique_ptr<LayerReport> report;
+  if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
+
+  std::vector<SliceMesh> meshes{{soup.corners, adjacency}};
+  for (std::size_t i = 0; i < features.size(); ++i) meshes.push_back({features[i].corners, featureTables[i]});
+  const std::size_t addCount = options.add.size();
+
+  struct LayerResult {
+    std::vector<uint8_t> payload;  // PNG bytes or mask runs
+    double area = 0;
+    uint64_t islands = 0;
+  };
+  struct SlotState {
+    RasterScratch raster;
+    MaskImage mask;
+    std::vector<ContourSet> sets;
+    std::vector<LayerResult> layers;
+  };
+  const BandPlan plan = planBands(planes.size(), options.slice);
+  std::vector<SlotState> slots(plan.slots);
+  for (SlotState& s : slots) s.layers.resize(plan.bandLayers);
+  const bool png = maskSink && maskSink->wantsPng();
+  MaskImage decoded;
+  decoded.width = maskJob.grid.width;
+  decoded.height = maskJob.grid.height;
+  double volumeMm3 = 0;
+
+  LayerStages stages;
+  stages.process = [&](uint32_t, std::span<const LayerContours> layer, std::size_t slot, uint32_t position) {
+    SlotState& s = slots[slot];
+    LayerResult& r = s.layers[position];
+    r.islands = 0;
+    for (std::size_t l = 0; l < layer[0].loopCount(); ++l)
+      r.islands += layer[0].loopClosed[l] && signedArea(layer[0].loopPoints(l)) > 0 ? 1 : 0;
+    if (!masks) {
+      r.area = layerSignedArea(layer[0]);
+      for (std::size_t i = 1; i < layer.size(); ++i) r.area += (i <= addCount ? 1 : -1) * layerSignedArea(layer[i]);
+      return;
+    }
+    s.sets.clear();
+    for (std::size_t i = 0; i < layer.size(); ++i) s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
+    if (maskJob.antiAliased) rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
+    else rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster);
+    r.area = maskArea(s.mask, maskJob.grid.pixel);
+    if (png) encodeMaskPng(s.mask, r.payload);
+    else encodeMaskRuns(s.mask, r.payload);
+  };
+  stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot, uint32_t position) {
+    const LayerResult& r = slots[slot].layers[position];
+    for (auto& sink : sinks) sink->writeLayer(k, layer[0]);
+    if (maskSink) {
+      if (png) {
+        maskSink->writeLayer(k, planes[k], decoded, r.payload);
+      } else {
+        decodeMaskRuns(r.payload, decoded);
+        maskSink->writeLayer(k, planes[k], decoded, {});
+      }
+    }
+    if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
+    volumeMm3 += r.area * layerThickness(planes, k, options.planes);
+  };
+
   start = std::chrono::steady_clock::now();
-  result.stats = sliceModel(soup.corners, adjacency, planes, options.slice,
-                            [&](uint32_t k, const LayerContours& layer) {
-                              for (auto& sink : sinks) sink->writeLayer(k, layer);
-                            },
-                            progress);
+  result.stats = sliceMeshes(meshes, planes, options.slice, stages, progress);
   if (result.stats.cancelled) throw InputError("interrupted");
+  result.volumeMl = volumeMm3 / 1000.0;
   for (auto& sink : sinks) sink->finish();
-  result.sliceSeconds = secondsSince(start);
   result.written = options.outputs;
+  if (maskSink) {
+    maskJob.volumeMl = result.volumeMl;
+    maskSink->finish(maskJob);
+    result.written.push_back(options.masks.output);
+  }
+  if (report) {
+    report->finish(result.volumeMl);
+    result.written.push_back(options.report);
+  }
+  result.sliceSeconds = secondsSince(start);
   return result;
 }
 

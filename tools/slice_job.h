@@ -5,6 +5,8 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <optional>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -17,6 +19,18 @@
 
 namespace toposlice {
 
+// Mask output settings (issue "Mask stacks for the projector").
+struct MaskOptions {
+  std::filesystem::path output;  // .sl1, .exr, .vdb, or a directory of PNGs; empty: no masks
+  std::string printer;           // preset name (core/printer.h); empty: none
+  std::optional<double> pixel;   // mm
+  std::optional<std::pair<uint32_t, uint32_t>> resolution;  // width, height
+  std::optional<std::pair<double, double>> origin;          // lower-left corner of pixel (0, 0), mm
+  bool mirrorX = false, mirrorY = false;
+  bool antialias = false;
+  bool crop = false;  // allow a model larger than the image
+};
+
 struct SliceJobOptions {
   PlaneSpec planes;
   SliceSettings slice;
@@ -27,6 +41,9 @@ struct SliceJobOptions {
   const TemplateTable* templateTable = nullptr;  // intra-model reuse: skip welding and adjacency
   bool rebuildOnMismatch = false;                // a variant that does not match: rebuild instead of failing
   bool fixOrientation = false;                   // flip every facet of an inside-out (negative volume) mesh
+  MaskOptions masks;
+  std::vector<std::filesystem::path> add, remove;  // add-on and removal features (inter-model reuse)
+  std::filesystem::path report;                    // per-layer CSV report; empty: none
 };
 
 struct SliceJobResult {
@@ -39,6 +56,7 @@ struct SliceJobResult {
   bool inverted = false, flipped = false;
   double readSeconds = 0, topologySeconds = 0, sliceSeconds = 0;
   SliceStats stats;
+  double volumeMl = 0;  // resin: mask area (or contour area without masks) x layer thickness
   std::vector<std::filesystem::path> written;
 };
 
