@@ -1,0 +1,714 @@
+// Mask-stack writers: PNG encoding, PNG directories, SL1 archives, OpenEXR stacks, OpenVDB slabs, and the
+// staging rules shared by every sink (docs/MASKS.md).
+#include <gtest/gtest.h>
+#include <spng.h>
+#include <unistd.h>
+#include <zip.h>  // libzip, to read archives back independently of the writer's minizip
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "io/errors.h"
+#include "io/exr_writer.h"
+#include "io/mask_png.h"
+#include "io/mask_sink.h"
+#include "io/sl1_writer.h"
+#include "io/vdb_writer.h"
+
+namespace toposlice {
+namespace {
+
+namespace fs = std::filesystem;
+
+MaskImage blankMask(uint32_t width, uint32_t height) {
+  MaskImage m;
+  m.width = width;
+  m.height = height;
+  m.pixels.assign(size_t{width} * height, 0);
+  return m;
+}
+
+// A disc of radius r at (cx, cy): binary, or with a soft edge (coverage-like values) when antiAliased.
+MaskImage discMask(uint32_t width, uint32_t height, double cx, double cy, double r, bool antiAliased) {
+  MaskImage m = blankMask(width, height);
+  for (uint32_t j = 0; j < height; ++j) {
+    for (uint32_t i = 0; i < width; ++i) {
+      const double d = std::hypot(i + 0.5 - cx, j + 0.5 - cy) - r;
+      double v = 0;
+      if (antiAliased) {
+        v = std::clamp(0.5 - d, 0.0, 1.0);
+      } else {
+        v = d < 0 ? 1 : 0;
+      }
+      m.pixels[size_t{j} * width + i] = static_cast<uint8_t>(std::lround(255 * v));
+    }
+  }
+  return m;
+}
+
+MaskImage noiseMask(uint32_t width, uint32_t height, uint32_t seed, bool binary) {
+  std::mt19937 rng(seed);
+  MaskImage m = blankMask(width, height);
+  for (uint8_t& p : m.pixels) {
+    const auto r = static_cast<uint32_t>(rng());
+    p = binary ? ((r & 1) ? 255 : 0) : static_cast<uint8_t>(r);
+  }
+  return m;
+}
+
+uint64_t litPixels(const MaskImage& m) {
+  uint64_t n = 0;
+  for (uint8_t p : m.pixels) n += p != 0;
+  return n;
+}
+
+// Decodes with libspng directly, rows top-down as stored in the file.
+bool decodeTopDown(const std::vector<uint8_t>& png, uint32_t& width, uint32_t& height,
+                   std::vector<uint8_t>& rows) {
+  spng_ctx* ctx = spng_ctx_new(0);
+  bool ok = spng_set_png_buffer(ctx, png.data(), png.size()) == 0;
+  spng_ihdr ihdr{};
+  ok = ok && spng_get_ihdr(ctx, &ihdr) == 0 && ihdr.bit_depth == 8 &&
+       ihdr.color_type == SPNG_COLOR_TYPE_GRAYSCALE;
+  size_t size = 0;
+  ok = ok && spng_decoded_image_size(ctx, SPNG_FMT_PNG, &size) == 0;
+  if (ok) {
+    rows.resize(size);
+    ok = spng_decode_image(ctx, rows.data(), size, SPNG_FMT_PNG, 0) == 0;
+    width = ihdr.width;
+    height = ihdr.height;
+  }
+  spng_ctx_free(ctx);
+  return ok;
+}
+
+void expectPngRoundTrip(const MaskImage& mask) {
+  std::vector<uint8_t> png;
+  encodeMaskPng(mask, png);
+  MaskImage back;
+  ASSERT_TRUE(decodeMaskPng(png, back)) << mask.width << "x" << mask.height;
+  EXPECT_EQ(back.width, mask.width);
+  EXPECT_EQ(back.height, mask.height);
+  EXPECT_TRUE(back.pixels == mask.pixels) << mask.width << "x" << mask.height;
+}
+
+std::map<std::string, std::string> parseIni(const std::string& text) {
+  std::map<std::string, std::string> m;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    const size_t eq = line.find(" = ");
+    if (eq != std::string::npos) m[line.substr(0, eq)] = line.substr(eq + 3);
+  }
+  return m;
+}
+
+std::string runTool(const std::string& command, int& rc) {
+  char name[] = "/tmp/toposlice-tool-XXXXXX";
+  const int fd = mkstemp(name);
+  if (fd >= 0) close(fd);
+  rc = std::system((command + " > " + name + " 2>&1").c_str());
+  std::ifstream in(name);
+  std::stringstream text;
+  text << in.rdbuf();
+  std::remove(name);
+  return text.str();
+}
+
+MaskJob smallJob(uint32_t width, uint32_t height, uint32_t layers, bool antiAliased) {
+  MaskJob job;
+  job.name = "part";
+  job.grid.width = width;
+  job.grid.height = height;
+  job.grid.pixel = 0.05;
+  job.grid.x0 = -1.0;
+  job.grid.y0 = 2.0;
+  job.layerHeight = 0.025;
+  job.layerCount = layers;
+  job.antiAliased = antiAliased;
+  return job;
+}
+
+// A fresh, empty directory per test, removed afterwards.
+class TempDirTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() / ("toposlice-masks-" + std::to_string(::getpid()) + "-" +
+                                        info->test_suite_name() + "-" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  // Entries of the test directory other than `keep`.
+  std::vector<std::string> strayEntries(const fs::path& keep = {}) const {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir_)) {
+      if (e.path() != keep) names.push_back(e.path().filename().string());
+    }
+    return names;
+  }
+
+  fs::path dir_;
+};
+
+// ---------------------------------------------------------------------------------------------------
+// PNG
+
+TEST(PngEncode, RoundTripsBinaryAndGrayImages) {
+  expectPngRoundTrip(blankMask(1, 1));
+  expectPngRoundTrip(noiseMask(1, 7, 1, true));
+  expectPngRoundTrip(noiseMask(2, 3, 2, false));
+  expectPngRoundTrip(noiseMask(17, 13, 3, true));
+  expectPngRoundTrip(noiseMask(64, 9, 4, false));
+  expectPngRoundTrip(discMask(301, 203, 150, 100, 80, false));
+  expectPngRoundTrip(discMask(301, 203, 150, 100, 80, true));
+  expectPngRoundTrip(discMask(2560, 1440, 1280.3, 700.7, 600, false));
+  expectPngRoundTrip(discMask(2560, 1440, 1280.3, 700.7, 600, true));
+  MaskImage full = blankMask(259, 4);  // runs of 259/260 bytes: the match-splitting remainders
+  std::fill(full.pixels.begin(), full.pixels.end(), 255);
+  expectPngRoundTrip(full);
+  expectPngRoundTrip(blankMask(258, 3));
+  expectPngRoundTrip(blankMask(257, 3));
+  // Rows wider than the 32 KiB deflate window: no copies of the row above.
+  MaskImage wide = discMask(40000, 3, 20000, 1.5, 15000, false);
+  expectPngRoundTrip(wide);
+}
+
+TEST(PngEncode, RandomRunImagesRoundTrip) {
+  // Runs of every length around the 258-byte match limit, repeated rows, few and many grey levels.
+  std::mt19937 rng(12345);
+  const auto below = [&rng](uint32_t n) { return static_cast<uint32_t>(rng() % n); };
+  for (uint32_t trial = 0; trial < 200; ++trial) {
+    const uint32_t width = 1 + below(700), height = 1 + below(40);
+    const uint32_t levels = trial % 3 == 0 ? 2 : 1 + below(256);
+    MaskImage m = blankMask(width, height);
+    for (uint32_t j = 0; j < height; ++j) {
+      uint8_t* row = m.pixels.data() + size_t{j} * width;
+      if (j > 0 && below(3) == 0) {
+        std::copy_n(row - width, width, row);
+        continue;
+      }
+      for (uint32_t i = 0; i < width;) {
+        const uint32_t run = std::min(width - i, 1 + below(600));
+        const auto value = static_cast<uint8_t>(levels == 2 ? below(2) * 255 : below(levels));
+        std::fill_n(row + i, run, value);
+        i += run;
+      }
+    }
+    expectPngRoundTrip(m);
+    if (HasFailure()) break;
+  }
+}
+
+TEST(PngEncode, RepeatedRowsAndLongRuns) {
+  MaskImage m = blankMask(1000, 50);
+  for (uint32_t j = 10; j < 40; ++j) {
+    for (uint32_t i = 100; i < 900; ++i) m.pixels[size_t{j} * 1000 + i] = 255;
+  }
+  m.pixels[size_t{25} * 1000 + 500] = 7;  // one row differs from its neighbours
+  expectPngRoundTrip(m);
+}
+
+TEST(PngEncode, RowZeroIsTheLastPngRow) {
+  MaskImage m = blankMask(5, 4);
+  m.pixels[0 * 5 + 2] = 255;  // pixel (2, 0): lowest y
+  std::vector<uint8_t> png;
+  encodeMaskPng(m, png);
+  uint32_t width = 0, height = 0;
+  std::vector<uint8_t> rows;
+  ASSERT_TRUE(decodeTopDown(png, width, height, rows));
+  ASSERT_EQ(width, 5u);
+  ASSERT_EQ(height, 4u);
+  for (uint32_t r = 0; r < height; ++r) {
+    for (uint32_t i = 0; i < width; ++i) {
+      EXPECT_EQ(rows[size_t{r} * width + i], (r == 3 && i == 2) ? 255 : 0) << "png row " << r << " col " << i;
+    }
+  }
+}
+
+TEST(PngEncode, SameImageSameBytesAndSmallForMasks) {
+  const MaskImage m = discMask(2560, 1440, 1280, 720, 500, false);
+  std::vector<uint8_t> a, b;
+  encodeMaskPng(m, a);
+  encodeMaskPng(m, b);
+  EXPECT_EQ(a, b);
+  EXPECT_LT(a.size(), 100000u);  // a disc: about 2 runs per row
+}
+
+TEST(PngEncode, Speed2560x1440Binary) {
+  // Twelve discs, 41 % lit: a typical busy layer.
+  MaskImage m = blankMask(2560, 1440);
+  for (int c = 0; c < 12; ++c) {
+    const MaskImage d =
+        discMask(2560, 1440, 200 + (c % 4) * 600, 250 + (c / 4) * 450, 120 + (c * 37) % 150, false);
+    for (size_t p = 0; p < m.pixels.size(); ++p) m.pixels[p] |= d.pixels[p];
+  }
+  std::vector<uint8_t> png;
+  double best = 1e9;
+  for (int it = 0; it < 20; ++it) {
+    const auto t0 = std::chrono::steady_clock::now();
+    encodeMaskPng(m, png);
+    best = std::min(best,
+                    std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  RecordProperty("encode_ms", std::to_string(best));
+  RecordProperty("png_bytes", std::to_string(png.size()));
+  std::printf("[ info     ] 2560x1440 binary mask: %.3f ms, %zu bytes\n", best, png.size());
+  EXPECT_LT(best, 50.0);  // about 0.5 ms optimised; loose for sanitizer and debug builds
+}
+
+TEST(PngDecode, RejectsGarbage) {
+  MaskImage m;
+  const std::vector<uint8_t> junk = {1, 2, 3, 4, 5};
+  EXPECT_FALSE(decodeMaskPng(junk, m));
+  std::vector<uint8_t> png;
+  encodeMaskPng(discMask(30, 20, 15, 10, 6, false), png);
+  png.resize(png.size() / 2);
+  EXPECT_FALSE(decodeMaskPng(png, m));
+}
+
+TEST(MaskNames, PadToFiveDigitsOrMore) {
+  EXPECT_EQ(maskLayerFileName("part", 7, 100, "png"), "part00007.png");
+  EXPECT_EQ(maskLayerFileName("part", 99999, 100000, "png"), "part99999.png");
+  EXPECT_EQ(maskLayerFileName("part", 7, 100001, "exr"), "part000007.exr");
+  EXPECT_EQ(maskLayerFileName("a/b\\c", 0, 1, "png"), "a_b_c00000.png");
+  EXPECT_EQ(maskLayerFileName("", 1, 1, "png"), "layer00001.png");
+}
+
+// ---------------------------------------------------------------------------------------------------
+// PNG directory
+
+using PngDirectory = TempDirTest;
+
+TEST_F(PngDirectory, WritesOneFilePerLayer) {
+  const MaskJob job = smallJob(31, 17, 3, false);
+  const fs::path out = dir_ / "stack";
+  std::vector<MaskImage> masks;
+  for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(31, 17, 15, 8, 3.0 + 2 * k, false));
+  auto sink = makeMaskSink(out, job, false);
+  ASSERT_TRUE(sink->wantsPng());
+  std::vector<uint8_t> png;
+  for (uint32_t k = 0; k < 3; ++k) {
+    encodeMaskPng(masks[k], png);
+    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k],
+                     k == 1 ? std::span<const uint8_t>{} : std::span<const uint8_t>(png));
+    EXPECT_FALSE(fs::exists(out));
+  }
+  sink->finish(job);
+  ASSERT_TRUE(fs::is_directory(out));
+  EXPECT_EQ(strayEntries(out).size(), 0u);
+  size_t files = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(out)) ++files;
+  EXPECT_EQ(files, 3u);
+  for (uint32_t k = 0; k < 3; ++k) {
+    std::ifstream in(out / maskLayerFileName("part", k, 3, "png"), std::ios::binary);
+    const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    MaskImage back;
+    ASSERT_TRUE(decodeMaskPng(bytes, back)) << k;
+    EXPECT_TRUE(back.pixels == masks[k].pixels) << k;
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
+// SL1
+
+using Sl1Archive = TempDirTest;
+
+struct ZipContents {
+  std::map<std::string, std::vector<uint8_t>> entries;
+  std::vector<std::string> order;
+  bool allStored = true;
+};
+
+ZipContents readZip(const fs::path& path) {
+  ZipContents z;
+  int err = 0;
+  zip_t* zip = zip_open(path.c_str(), ZIP_RDONLY | ZIP_CHECKCONS, &err);
+  EXPECT_NE(zip, nullptr) << "libzip error " << err;
+  if (zip == nullptr) return z;
+  const zip_int64_t n = zip_get_num_entries(zip, 0);
+  for (zip_int64_t i = 0; i < n; ++i) {
+    zip_stat_t st;
+    zip_stat_init(&st);
+    EXPECT_EQ(zip_stat_index(zip, static_cast<zip_uint64_t>(i), 0, &st), 0);
+    z.allStored = z.allStored && st.comp_method == ZIP_CM_STORE;
+    std::vector<uint8_t> data(st.size);
+    zip_file_t* f = zip_fopen_index(zip, static_cast<zip_uint64_t>(i), 0);
+    EXPECT_NE(f, nullptr);
+    if (f != nullptr) {
+      EXPECT_EQ(zip_fread(f, data.data(), st.size), static_cast<zip_int64_t>(st.size));  // checks the CRC too
+      zip_fclose(f);
+    }
+    z.order.push_back(st.name);
+    z.entries[st.name] = std::move(data);
+  }
+  zip_close(zip);
+  return z;
+}
+
+std::string asText(const std::vector<uint8_t>& bytes) {
+  return std::string(bytes.begin(), bytes.end());
+}
+
+TEST_F(Sl1Archive, HoldsLayersAndBothIniFiles) {
+  MaskJob job = smallJob(40, 30, 3, true);
+  job.printerModel = "SL1S";
+  const fs::path out = dir_ / "part.sl1";
+  std::vector<MaskImage> masks;
+  for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(40, 30, 20, 15, 5.0 + 3 * k, true));
+  auto sink = makeMaskSink(out, job, false);
+  ASSERT_TRUE(sink->wantsPng());
+  std::vector<uint8_t> png;
+  for (uint32_t k = 0; k < 3; ++k) {
+    encodeMaskPng(masks[k], png);
+    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k], png);
+  }
+  EXPECT_FALSE(fs::exists(out));
+  job.volumeMl = 1.23456;
+  sink->finish(job);
+  ASSERT_TRUE(fs::is_regular_file(out));
+  EXPECT_EQ(strayEntries(out).size(), 0u);
+
+  const ZipContents z = readZip(out);
+  EXPECT_TRUE(z.allStored);
+  ASSERT_EQ(z.entries.size(), 5u);
+  for (uint32_t k = 0; k < 3; ++k) {
+    const std::string name = "part0000" + std::to_string(k) + ".png";
+    ASSERT_EQ(z.entries.count(name), 1u) << name;
+    MaskImage back;
+    ASSERT_TRUE(decodeMaskPng(z.entries.at(name), back)) << name;
+    EXPECT_EQ(back.width, 40u);
+    EXPECT_EQ(back.height, 30u);
+    EXPECT_TRUE(back.pixels == masks[k].pixels) << name;
+  }
+  ASSERT_EQ(z.entries.count("config.ini"), 1u);
+  ASSERT_EQ(z.entries.count("prusaslicer.ini"), 1u);
+  const auto config = parseIni(asText(z.entries.at("config.ini")));
+  EXPECT_EQ(config.at("jobDir"), "part");
+  EXPECT_EQ(config.at("action"), "print");
+  EXPECT_EQ(config.at("numFast"), "3");
+  EXPECT_EQ(config.at("numSlow"), "0");
+  EXPECT_EQ(config.at("numFade"), "10");
+  EXPECT_EQ(config.at("layerHeight"), "0.025");
+  EXPECT_EQ(config.at("layerHeightFirst"), "0.025");
+  EXPECT_EQ(config.at("expTime"), "8");
+  EXPECT_EQ(config.at("expTimeFirst"), "35");
+  EXPECT_EQ(config.at("usedMaterial"), "1.235");
+  EXPECT_EQ(config.at("printerModel"), "SL1S");
+  EXPECT_EQ(config.at("printerVariant"), "default");
+  for (const char* key : {"printTime", "fileCreationTimestamp", "materialName", "printProfile",
+                          "printerProfile", "prusaSlicerVersion", "expUserProfile", "hollow"}) {
+    EXPECT_EQ(config.count(key), 1u) << key;
+  }
+  const auto profile = parseIni(asText(z.entries.at("prusaslicer.ini")));
+  EXPECT_EQ(profile.at("display_pixels_x"), "40");
+  EXPECT_EQ(profile.at("display_pixels_y"), "30");
+  EXPECT_EQ(profile.at("display_width"), "2");
+  EXPECT_EQ(profile.at("display_height"), "1.5");
+  EXPECT_EQ(profile.at("display_orientation"), "landscape");
+  EXPECT_EQ(profile.at("display_mirror_x"), "0");
+  EXPECT_EQ(profile.at("display_mirror_y"), "0");
+  EXPECT_EQ(profile.at("printer_technology"), "SLA");
+  EXPECT_EQ(profile.at("printer_model"), "SL1S");
+  EXPECT_EQ(profile.at("layer_height"), "0.025");
+  EXPECT_EQ(profile.at("initial_layer_height"), "0.025");
+  EXPECT_EQ(profile.at("gamma_correction"), "1");
+  EXPECT_EQ(profile.at("exposure_time"), "8");
+  EXPECT_EQ(profile.at("initial_exposure_time"), "35");
+  EXPECT_EQ(profile.at("faded_layers"), "10");
+}
+
+TEST_F(Sl1Archive, EncodesItselfWithoutPngAndIsReproducible) {
+  const MaskJob job = smallJob(20, 12, 2, false);
+  ::setenv("SOURCE_DATE_EPOCH", "1700000000", 1);
+  std::vector<std::vector<uint8_t>> files;
+  for (const char* name : {"a.SL1", "b.sl1s"}) {
+    auto sink = makeMaskSink(dir_ / name, job, false);
+    for (uint32_t k = 0; k < 2; ++k) sink->writeLayer(k, 0.1 * k, discMask(20, 12, 10, 6, 2 + k, false), {});
+    sink->finish(job);
+    std::ifstream in(dir_ / name, std::ios::binary);
+    files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  }
+  ::unsetenv("SOURCE_DATE_EPOCH");
+  EXPECT_EQ(files[0], files[1]);
+  const ZipContents z = readZip(dir_ / "a.SL1");
+  EXPECT_EQ(z.entries.size(), 4u);
+  const auto config = parseIni(asText(z.entries.at("config.ini")));
+  EXPECT_EQ(config.at("fileCreationTimestamp"), "2023-11-14 at 22:13:20 UTC");
+  EXPECT_EQ(config.at("printerModel"), "SL1");
+  MaskImage back;
+  ASSERT_TRUE(decodeMaskPng(z.entries.at("part00001.png"), back));
+  EXPECT_TRUE(back.pixels == discMask(20, 12, 10, 6, 3, false).pixels);
+}
+
+TEST_F(Sl1Archive, Zip64PastSixtyFiveThousandEntries) {
+  const uint32_t layers = 70000;
+  const MaskJob job = smallJob(8, 8, layers, false);
+  MaskImage m = blankMask(8, 8);
+  m.pixels[9] = 255;
+  std::vector<uint8_t> png;
+  encodeMaskPng(m, png);
+  auto sink = makeMaskSink(dir_ / "many.sl1", job, false);
+  for (uint32_t k = 0; k < layers; ++k) sink->writeLayer(k, 0.025 * k, m, png);
+  sink->finish(job);
+  int err = 0;
+  zip_t* zip = zip_open((dir_ / "many.sl1").c_str(), ZIP_RDONLY | ZIP_CHECKCONS, &err);
+  ASSERT_NE(zip, nullptr) << "libzip error " << err;
+  EXPECT_EQ(zip_get_num_entries(zip, 0), layers + 2);
+  EXPECT_GE(zip_name_locate(zip, "part69999.png", 0), 0);
+  EXPECT_GE(zip_name_locate(zip, "prusaslicer.ini", 0), 0);
+  zip_close(zip);
+}
+
+TEST_F(Sl1Archive, RefusesMoreLayersThanFiveDigitNames) {
+  const MaskJob job = smallJob(4, 4, kSl1MaxLayers + 1, false);
+  EXPECT_THROW(makeMaskSink(dir_ / "big.sl1", job, false), OutputError);
+  EXPECT_TRUE(strayEntries().empty());
+}
+
+TEST(Sl1Ini, FadeAndPrintTime) {
+  MaskJob job = smallJob(10, 10, 20, false);
+  job.fadeLayers = 1;  // the firmware divides by numFade - 1
+  const auto config = parseIni(sl1ConfigIni(job, 20, 0));
+  EXPECT_EQ(config.at("numFade"), "2");
+  EXPECT_EQ(config.at("fileCreationTimestamp"), "1970-01-01 at 00:00:00 UTC");
+  // First layer 35 s, the other 19 at 8 s, plus the per-layer overhead.
+  EXPECT_EQ(config.at("printTime"), std::to_string(static_cast<int>(35 + 19 * 8 + 20 * kSl1LayerOverheadS)));
+}
+
+// ---------------------------------------------------------------------------------------------------
+// EXR
+
+using ExrStack = TempDirTest;
+
+TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
+  const MaskJob job = smallJob(33, 21, 3, true);
+  const fs::path out = dir_ / "part.exr";
+  std::vector<MaskImage> masks;
+  for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(33, 21, 16, 10, 4.0 + 2.5 * k, true));
+  masks[2].pixels[0] = 255;  // pixel (0, 0): bottom-left
+  auto sink = makeMaskSink(out, job, false);
+  EXPECT_FALSE(sink->wantsPng());
+  for (uint32_t k = 0; k < 3; ++k) sink->writeLayer(k, 0.0125 + k * 0.025, masks[k], {});
+  EXPECT_FALSE(fs::exists(out));
+  sink->finish(job);
+  ASSERT_TRUE(fs::is_directory(out));
+  EXPECT_EQ(strayEntries(out).size(), 0u);
+  for (uint32_t k = 0; k < 3; ++k) {
+    const ExrMaskLayer layer = readExrMaskLayer(out / maskLayerFileName("part", k, 3, "exr"));
+    EXPECT_EQ(layer.channel, "Y");
+    EXPECT_EQ(layer.width, 33u);
+    EXPECT_EQ(layer.height, 21u);
+    EXPECT_EQ(layer.layer, static_cast<int>(k));
+    EXPECT_FLOAT_EQ(layer.z, static_cast<float>(0.0125 + k * 0.025));
+    EXPECT_FLOAT_EQ(layer.pixelSize, 0.05f);
+    EXPECT_FLOAT_EQ(layer.layerHeight, 0.025f);
+    ASSERT_EQ(layer.values.size(), masks[k].pixels.size());
+    for (size_t p = 0; p < layer.values.size(); ++p) {
+      ASSERT_NEAR(layer.values[p], masks[k].pixels[p] / 255.0f, 1e-3f) << "layer " << k << " pixel " << p;
+    }
+  }
+  if (!fs::exists("/usr/bin/exrheader")) GTEST_SKIP() << "exrheader not installed (Debian package openexr)";
+  int rc = -1;
+  const std::string text = runTool("/usr/bin/exrheader '" + (out / "part00001.exr").string() + "'", rc);
+  EXPECT_EQ(rc, 0) << text;
+  EXPECT_NE(text.find("z (type float): 0.0375"), std::string::npos) << text;
+  EXPECT_NE(text.find("layer (type int): 1"), std::string::npos) << text;
+  EXPECT_NE(text.find("Y, 16-bit floating-point"), std::string::npos) << text;
+  EXPECT_NE(text.find("zip"), std::string::npos) << text;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// VDB
+
+using VdbSlabs = TempDirTest;
+
+// Layers with full 8x8x8 blocks (tiles), partial blocks at the image edges and sparse noise.
+std::vector<MaskImage> vdbLayers(uint32_t width, uint32_t height, uint32_t count, bool antiAliased) {
+  std::vector<MaskImage> layers;
+  for (uint32_t k = 0; k < count; ++k) {
+    MaskImage m = discMask(width, height, width / 2.0, height / 2.0, width / 3.0 + (k % 5), antiAliased);
+    if (k % 7 == 3) m.pixels[size_t{height - 1} * width + (width - 1)] = 200;  // top-right corner
+    layers.push_back(std::move(m));
+  }
+  return layers;
+}
+
+void writeAll(MaskSink& sink, const std::vector<MaskImage>& layers, double z0, double h) {
+  for (uint32_t k = 0; k < layers.size(); ++k) sink.writeLayer(k, z0 + k * h, layers[k], {});
+}
+
+TEST_F(VdbSlabs, BinaryMaskGridCountsAndTransform) {
+  const uint32_t width = 45, height = 29, count = 20;
+  const MaskJob job = smallJob(width, height, count, false);
+  const fs::path out = dir_ / "part.vdb";
+  const auto layers = vdbLayers(width, height, count, false);
+  auto sink = makeMaskSink(out, job, false);
+  writeAll(*sink, layers, 0.0125, 0.025);
+  EXPECT_FALSE(fs::exists(out));
+  sink->finish(job);
+  ASSERT_TRUE(fs::is_regular_file(out));
+  EXPECT_EQ(strayEntries(out).size(), 0u);
+
+  const auto slabs = readVdbSlabs(out);
+  ASSERT_EQ(slabs.size(), 1u);
+  uint64_t lit = 0;
+  for (const auto& m : layers) lit += litPixels(m);
+  EXPECT_EQ(slabs[0].name, "mask_00000");
+  EXPECT_EQ(slabs[0].valueType, "mask");
+  EXPECT_EQ(slabs[0].activeVoxels, lit);
+  EXPECT_EQ(slabs[0].firstLayer, 0);
+  EXPECT_EQ(slabs[0].lastLayer, 19);
+  EXPECT_NEAR(slabs[0].voxelSize[0], 0.05, 1e-12);
+  EXPECT_NEAR(slabs[0].voxelSize[1], 0.05, 1e-12);
+  EXPECT_NEAR(slabs[0].voxelSize[2], 0.025, 1e-12);
+  EXPECT_NEAR(slabs[0].voxelOrigin[0], -1.0 + 0.025, 1e-12);  // x0 + p/2
+  EXPECT_NEAR(slabs[0].voxelOrigin[1], 2.0 + 0.025, 1e-12);
+  EXPECT_NEAR(slabs[0].voxelOrigin[2], 0.0125, 1e-12);  // the first layer's plane
+  for (uint32_t k : {0u, 3u, 8u, 19u}) {
+    const MaskImage back = readVdbLayer(out, k, width, height);
+    MaskImage expected = layers[k];
+    for (uint8_t& p : expected.pixels) p = p ? 255 : 0;
+    EXPECT_TRUE(back.pixels == expected.pixels) << "layer " << k;
+  }
+
+  if (!fs::exists("/usr/bin/vdb_print"))
+    GTEST_SKIP() << "vdb_print not installed (Debian package libopenvdb-tools)";
+  int rc = -1;
+  const std::string text = runTool("/usr/bin/vdb_print -l '" + out.string() + "'", rc);
+  EXPECT_EQ(rc, 0) << text;
+  EXPECT_NE(text.find("mask_00000"), std::string::npos) << text;
+}
+
+TEST_F(VdbSlabs, AntiAliasedFloatGridsInSlabs) {
+  const uint32_t width = 24, height = 17, count = 150;
+  const MaskJob job = smallJob(width, height, count, true);
+  const fs::path out = dir_ / "part.vdb";
+  const auto layers = vdbLayers(width, height, count, true);
+  auto sink = makeMaskSink(out, job, false);
+  writeAll(*sink, layers, 0.5, 0.025);
+  sink->finish(job);
+
+  const auto slabs = readVdbSlabs(out);
+  ASSERT_EQ(slabs.size(), 3u);  // layers 0-63, 64-127, 128-149
+  const int first[] = {0, 64, 128}, last[] = {63, 127, 149};
+  for (size_t s = 0; s < 3; ++s) {
+    EXPECT_EQ(slabs[s].valueType, "float");
+    EXPECT_EQ(slabs[s].firstLayer, first[s]);
+    EXPECT_EQ(slabs[s].lastLayer, last[s]);
+    uint64_t lit = 0;
+    for (int k = first[s]; k <= last[s]; ++k) lit += litPixels(layers[static_cast<size_t>(k)]);
+    EXPECT_EQ(slabs[s].activeVoxels, lit) << slabs[s].name;
+    EXPECT_NEAR(slabs[s].voxelOrigin[2], 0.5, 1e-12);  // one transform for all slabs: k is absolute
+  }
+  EXPECT_EQ(slabs[1].name, "mask_00064");
+  for (uint32_t k : {0u, 63u, 64u, 100u, 149u}) {
+    EXPECT_TRUE(readVdbLayer(out, k, width, height).pixels == layers[k].pixels) << "layer " << k;
+  }
+  EXPECT_THROW(readVdbLayer(out, 150, width, height), InputError);
+}
+
+TEST_F(VdbSlabs, MirroredImagesKeepWorldPositions) {
+  MaskJob job = smallJob(10, 6, 1, false);
+  job.grid.mirrorX = true;
+  const fs::path out = dir_ / "m.vdb";
+  auto sink = makeMaskSink(out, job, false);
+  sink->writeLayer(0, 1.0, discMask(10, 6, 5, 3, 2, false), {});
+  sink->finish(job);
+  const auto slabs = readVdbSlabs(out);
+  ASSERT_EQ(slabs.size(), 1u);
+  EXPECT_NEAR(slabs[0].voxelOrigin[0], -1.0 + 9.5 * 0.05, 1e-12);  // pixel 0 shows column width-1
+  EXPECT_NEAR(slabs[0].voxelOrigin[1], 2.0 + 0.025, 1e-12);
+  EXPECT_NEAR(slabs[0].voxelSize[0], 0.05, 1e-12);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Staging rules shared by every sink
+
+using MaskStaging = TempDirTest;
+
+const char* const kOutputs[] = {"stack", "part.sl1", "part.exr", "part.vdb"};
+
+TEST_F(MaskStaging, InterruptedWritesLeaveNothing) {
+  const MaskJob job = smallJob(16, 16, 4, false);
+  const MaskImage m = discMask(16, 16, 8, 8, 5, false);
+  for (const char* name : kOutputs) {
+    {
+      auto sink = makeMaskSink(dir_ / name, job, false);
+      sink->writeLayer(0, 0.0125, m, {});
+      sink->writeLayer(1, 0.0375, m, {});
+      EXPECT_FALSE(strayEntries().empty()) << name << ": the temporary should exist while writing";
+    }  // destroyed without finish()
+    EXPECT_FALSE(fs::exists(dir_ / name)) << name;
+    EXPECT_TRUE(strayEntries().empty()) << name << ": " << (strayEntries().empty() ? "" : strayEntries()[0]);
+  }
+}
+
+TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
+  const MaskJob job = smallJob(16, 16, 1, false);
+  const MaskImage m = discMask(16, 16, 8, 8, 5, false);
+  for (size_t n = 0; n < std::size(kOutputs); ++n) {
+    const char* name = kOutputs[n];
+    const fs::path out = dir_ / name;
+    {
+      std::ofstream old(out);
+      old << "old";
+    }
+    EXPECT_THROW(makeMaskSink(out, job, false), OutputError) << name;
+    EXPECT_EQ(fs::file_size(out), 3u) << name;
+    auto sink = makeMaskSink(out, job, true);
+    sink->writeLayer(0, 0.0125, m, {});
+    sink->finish(job);
+    EXPECT_TRUE(fs::exists(out)) << name;
+    EXPECT_FALSE(fs::is_regular_file(out) && fs::file_size(out) == 3u) << name << " was not replaced";
+    EXPECT_EQ(strayEntries(out).size(), n) << name;  // the outputs of the previous rounds
+  }
+  // A second run over directory outputs replaces them too.
+  auto sink = makeMaskSink(dir_ / "stack", job, true);
+  sink->writeLayer(0, 0.0125, m, {});
+  sink->finish(job);
+  EXPECT_TRUE(fs::is_regular_file(dir_ / "stack" / "part00000.png"));
+}
+
+TEST_F(MaskStaging, OutputCreatedMeanwhileIsNotReplaced) {
+  const MaskJob job = smallJob(8, 8, 1, false);
+  const MaskImage m = blankMask(8, 8);
+  for (const char* name : kOutputs) {
+    auto sink = makeMaskSink(dir_ / name, job, false);
+    sink->writeLayer(0, 0.0125, m, {});
+    {
+      std::ofstream other(dir_ / name);
+      other << "other";
+    }
+    EXPECT_THROW(sink->finish(job), OutputError) << name;
+    sink.reset();
+    EXPECT_EQ(fs::file_size(dir_ / name), 5u) << name;
+    fs::remove(dir_ / name);
+    EXPECT_TRUE(strayEntries().empty()) << name;
+  }
+}
+
+TEST_F(MaskStaging, LayersMustArriveInOrderAtTheJobSize) {
+  const MaskJob job = smallJob(8, 8, 3, false);
+  for (const char* name : kOutputs) {
+    auto sink = makeMaskSink(dir_ / name, job, false);
+    EXPECT_THROW(sink->writeLayer(1, 0.0, blankMask(8, 8), {}), OutputError) << name;
+    EXPECT_THROW(sink->writeLayer(0, 0.0, blankMask(9, 8), {}), OutputError) << name;
+  }
+  EXPECT_TRUE(strayEntries().empty());
+}
+
+}  // namespace
+}  // namespace toposlice
