@@ -21,6 +21,13 @@ struct PixelGrid {
 struct MaskImage {
   uint32_t width = 0, height = 0;
   std::vector<uint8_t> pixels;  // width * height, row j = j-th row from the lowest y
+  // Optional tight extents of the non-zero pixels of each stored row r: pixels[r * width + i] != 0 only
+  // for litBegin[r] <= i < litEnd[r], and both ends are non-zero pixels (begin >= end: a dark row).
+  // Either both vectors hold `height` entries or both are empty (extents unknown). The binary
+  // rasterizer keeps them, clears only what it lit before, and writers skip dark pixels with them;
+  // anyone else changing `pixels` must clear them.
+  std::vector<uint32_t> litBegin, litEnd;
+  bool hasExtents() const { return litBegin.size() == height && litEnd.size() == height && height > 0; }
 };
 
 }  // namespace toposlice

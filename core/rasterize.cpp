@@ -161,30 +161,48 @@ bool usableGrid(const PixelGrid& grid) {
 }  // namespace
 
 void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, MaskImage& out,
-                     RasterScratch& scratch) {
+                     RasterScratch& scratch, uint64_t* litPixels) {
   assert(usableGrid(grid));
+  if (litPixels) *litPixels = 0;
   const uint32_t width = grid.width, height = grid.height;
+  // Reuse of the previous image: with known extents only its lit spans need clearing.
+  const bool reuse = out.width == width && out.height == height && out.hasExtents() &&
+                     out.pixels.size() == static_cast<std::size_t>(width) * height;
   out.width = width;
   out.height = height;
   out.pixels.resize(static_cast<std::size_t>(width) * height);
+  if (!reuse) std::fill(out.pixels.begin(), out.pixels.end(), uint8_t{0});
+  out.litBegin.resize(height);
+  out.litEnd.resize(height);
   if (width == 0 || height == 0) return;
-  if (!usableGrid(grid)) {
-    std::fill(out.pixels.begin(), out.pixels.end(), uint8_t{0});
-    return;
+  for (uint32_t r = 0; r < height; ++r) {
+    if (reuse && out.litBegin[r] < out.litEnd[r])
+      std::memset(out.pixels.data() + static_cast<std::size_t>(r) * width + out.litBegin[r], 0,
+                  out.litEnd[r] - out.litBegin[r]);
+    out.litBegin[r] = width;
+    out.litEnd[r] = 0;
   }
+  if (!usableGrid(grid)) return;
 
   buildEdgeTable(sets, grid.y0, grid.pixel, height, scratch);
   for (uint32_t j = 0; j < height; ++j) {
-    uint8_t* row = out.pixels.data() + static_cast<std::size_t>(grid.mirrorY ? height - 1 - j : j) * width;
-    std::memset(row, 0, width);
     if (!hasWork(j, scratch)) continue;
+    const uint32_t r = grid.mirrorY ? height - 1 - j : j;
+    uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     advanceTo(j, samplePosition(grid.y0, grid.pixel, j), scratch);
+    uint32_t lo = width, hi = 0;
     forEachSolidRun(scratch.active, [&](double xa, double xb) {
       const uint32_t ia = firstSampleAtOrAbove(xa, grid.x0, grid.pixel, width);
       const uint32_t ib = firstSampleAtOrAbove(xb, grid.x0, grid.pixel, width);
       if (ia >= ib) return;
-      std::memset(row + (grid.mirrorX ? width - ib : ia), 255, ib - ia);
+      const uint32_t a = grid.mirrorX ? width - ib : ia, b = grid.mirrorX ? width - ia : ib;
+      std::memset(row + a, 255, b - a);
+      lo = std::min(lo, a);
+      hi = std::max(hi, b);
+      if (litPixels) *litPixels += ib - ia;
     });
+    out.litBegin[r] = lo;
+    out.litEnd[r] = hi;
   }
 }
 
@@ -196,6 +214,8 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   out.width = width;
   out.height = height;
   out.pixels.resize(static_cast<std::size_t>(width) * height);
+  out.litBegin.clear();  // every pixel is rewritten; extents are not tracked for coverage masks
+  out.litEnd.clear();
   if (width == 0 || height == 0) return;
   if (!usableGrid(grid)) {
     std::fill(out.pixels.begin(), out.pixels.end(), uint8_t{0});
@@ -296,8 +316,17 @@ std::size_t countLitPixels(const MaskImage& mask) {
 }
 
 double maskArea(const MaskImage& mask, double pixel) {
+  // Blocks small enough for a 32-bit partial sum (255 * 65536 < 2^32), which the compiler vectorizes.
+  constexpr std::size_t kBlock = 65536;
+  const uint8_t* p = mask.pixels.data();
+  const std::size_t n = mask.pixels.size();
   uint64_t sum = 0;
-  for (const uint8_t v : mask.pixels) sum += v;
+  for (std::size_t at = 0; at < n; at += kBlock) {
+    const std::size_t end = std::min(n, at + kBlock);
+    uint32_t partial = 0;
+    for (std::size_t i = at; i < end; ++i) partial += p[i];
+    sum += partial;
+  }
   return static_cast<double>(sum) / 255.0 * pixel * pixel;
 }
 

@@ -75,8 +75,9 @@ inline constexpr uint32_t kDefaultSubScanlines = 16;
 // Binary mask of the sets' positive-winding region. Every set's layer is non-null, sign is +1 or -1;
 // grid.pixel > 0 and grid.width * grid.height fits in memory. `out` is resized to width x height and
 // every pixel is written (255 solid, 0 empty). O(edges + crossings log + width*height) per call.
+// When litPixels is given it receives the number of lit pixels (counted from the runs, no extra pass).
 void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, MaskImage& out,
-                     RasterScratch& scratch);
+                     RasterScratch& scratch, uint64_t* litPixels = nullptr);
 
 // Anti-aliased mask: each pixel holds round(255 * covered fraction) of the positive-winding region,
 // sampled with `subScanlines` (S, 1..256) sub-scanlines per row and exact coverage along each (see the

@@ -308,17 +308,43 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out) {
   RowSums sums;
   int last = -1;  // last byte sent, -1 before the first
   const uint8_t* previous = nullptr;
+  // With known extents (mask_image.h) dark pixels are never read: rows compare on their lit spans and
+  // zero runs outside them are known without scanning.
+  const bool extents = mask.hasExtents();
+  size_t previousBegin = 0, previousEnd = width;
   for (size_t r = 0; r < height; ++r) {
-    const uint8_t* row = mask.pixels.data() + (height - 1 - r) * width;
+    const size_t stored = height - 1 - r;
+    const uint8_t* row = mask.pixels.data() + stored * width;
+    size_t litBegin = 0, litEnd = width;
+    if (extents) {
+      litBegin = mask.litBegin[stored];
+      litEnd = mask.litEnd[stored];
+      if (litBegin >= litEnd) litBegin = litEnd = width;
+    }
     w.reserve(worstRowBytes);
-    if (rowCopies && previous != nullptr && std::memcmp(row, previous, width) == 0) {
+    const bool sameAsPrevious =
+        previous != nullptr &&
+        (extents ? litBegin == previousBegin && litEnd == previousEnd &&
+                       std::memcmp(row + litBegin, previous + litBegin, litEnd - litBegin) == 0
+                 : std::memcmp(row, previous, width) == 0);
+    previousBegin = litBegin;
+    previousEnd = litEnd;
+    // First position >= p whose byte differs from v, using the extents where they settle it.
+    auto runFrom = [&](size_t p, uint8_t v) {
+      if (!extents) return runEnd(row, p, width, v);
+      if (p >= litEnd) return width;                // dark to the end (v is 0 there)
+      if (v == 0 && p < litBegin) return litBegin;  // dark up to the first lit pixel
+      const size_t e = runEnd(row, p, litEnd, v);
+      return e == litEnd && v == 0 ? width : e;
+    };
+    if (rowCopies && sameAsPrevious) {
       const uint32_t left = putCopies(w, static_cast<uint32_t>(n), rowDistance);
       assert(left == 0);
       (void)left;
     } else {
       sums = RowSums{};
       // The filter byte 0 joins a run of zeros at the start of the row.
-      size_t p = runEnd(row, 0, width, 0);
+      size_t p = runFrom(0, 0);
       uint32_t length = static_cast<uint32_t>(p) + 1;
       uint8_t value = 0;
       uint64_t offset = 0;  // of the run in the filtered row
@@ -335,7 +361,7 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out) {
         if (p == width) break;
         offset = p + 1;
         value = row[p];
-        const size_t end = runEnd(row, p + 1, width, value);
+        const size_t end = runFrom(p + 1, value);
         length = static_cast<uint32_t>(end - p);
         p = end;
       }

@@ -247,9 +247,14 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     }
     s.sets.clear();
     for (std::size_t i = 0; i < layer.size(); ++i) s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
-    if (maskJob.antiAliased) rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
-    else rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster);
-    r.area = maskArea(s.mask, maskJob.grid.pixel);
+    if (maskJob.antiAliased) {
+      rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
+      r.area = maskArea(s.mask, maskJob.grid.pixel);
+    } else {
+      uint64_t lit = 0;
+      rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster, &lit);
+      r.area = static_cast<double>(lit) * maskJob.grid.pixel * maskJob.grid.pixel;
+    }
     if (png) encodeMaskPng(s.mask, r.payload);
     else encodeMaskRuns(s.mask, r.payload);
   };
