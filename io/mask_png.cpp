@@ -332,7 +332,7 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out) {
     // First position >= p whose byte differs from v, using the extents where they settle it.
     auto runFrom = [&](size_t p, uint8_t v) {
       if (!extents) return runEnd(row, p, width, v);
-      if (p >= litEnd) return width;                // dark to the end (v is 0 there)
+      if (p >= litEnd) return v == 0 ? width : p;  // dark to the end
       if (v == 0 && p < litBegin) return litBegin;  // dark up to the first lit pixel
       const size_t e = runEnd(row, p, litEnd, v);
       return e == litEnd && v == 0 ? width : e;

@@ -1,4 +1,5 @@
 #include "core/rasterize.h"
+#include "io/mask_png.h"
 
 #include <gtest/gtest.h>
 
@@ -528,6 +529,58 @@ TEST(RasterCoverage, ClippedAtGridBorder) {
     EXPECT_EQ(at(m, 1, j), 255);
     EXPECT_EQ(at(m, 2, j), 128);
     EXPECT_EQ(at(m, 3, j), 0);
+  }
+}
+
+}  // namespace
+}  // namespace toposlice
+
+namespace toposlice {
+namespace {
+
+// The lit extents the binary rasterizer keeps are tight and exact, survive reuse of the image across
+// layers (with mirroring), and the PNG encoder's extent path gives the same image as the full scan.
+TEST(RasterBinary, LitExtentsAreTightAndPngRoundTrips) {
+  std::mt19937 rng(777);
+  RasterScratch scratch;
+  MaskImage reused;
+  for (int trial = 0; trial < 60; ++trial) {
+    PixelGrid grid = unitGrid(40, 33);
+    grid.mirrorX = trial % 2 == 1;
+    grid.mirrorY = trial % 3 == 1;
+    const std::vector<LayerContours> layers = randomLayers(rng);
+    const std::vector<ContourSet> sets = {{&layers[0], 1}, {&layers[1], 1}, {&layers[2], -1}};
+    uint64_t lit = 0;
+    rasterizeBinary(sets, grid, reused, scratch, &lit);
+    const MaskImage fresh = binary(sets, grid);
+    ASSERT_EQ(reused.pixels, fresh.pixels) << "trial " << trial;
+    ASSERT_EQ(lit, countLitPixels(fresh));
+    ASSERT_TRUE(reused.hasExtents());
+    for (uint32_t r = 0; r < grid.height; ++r) {
+      const uint8_t* row = reused.pixels.data() + std::size_t{r} * grid.width;
+      uint32_t lo = grid.width, hi = 0;
+      for (uint32_t i = 0; i < grid.width; ++i)
+        if (row[i]) {
+          lo = std::min(lo, i);
+          hi = i + 1;
+        }
+      if (lo >= hi) {
+        EXPECT_GE(reused.litBegin[r], reused.litEnd[r]) << "row " << r;
+      } else {
+        EXPECT_EQ(reused.litBegin[r], lo) << "row " << r;
+        EXPECT_EQ(reused.litEnd[r], hi) << "row " << r;
+      }
+    }
+    std::vector<uint8_t> withExtents, withoutExtents;
+    encodeMaskPng(reused, withExtents);
+    MaskImage plain = reused;
+    plain.litBegin.clear();
+    plain.litEnd.clear();
+    encodeMaskPng(plain, withoutExtents);
+    EXPECT_EQ(withExtents, withoutExtents) << "trial " << trial;
+    MaskImage decoded;
+    ASSERT_TRUE(decodeMaskPng(withExtents, decoded));
+    EXPECT_EQ(decoded.pixels, fresh.pixels);
   }
 }
 
