@@ -38,6 +38,11 @@ FacetLayers computeFacetLayers(std::span<const Point3f> corners, std::span<const
 class ActiveFacets {
  public:
   void start(const FacetLayers& layers, uint32_t layer);
+  // Starts at `layer` from its crossing facets found elsewhere (e.g. a BVH query), ascending.
+  void startFrom(std::span<const uint32_t> facets, uint32_t layer) {
+    active_.assign(facets.begin(), facets.end());
+    layer_ = layer;
+  }
   void advance(const FacetLayers& layers);  // to layer() + 1
   std::span<const uint32_t> facets() const { return active_; }
   uint32_t layer() const { return layer_; }

@@ -37,6 +37,11 @@ struct MarchMesh {
 class ActiveRecords {
  public:
   void start(const MarchMesh& mesh, uint32_t layer);
+  // Starts at `layer` from its crossing records found elsewhere (e.g. a BVH query), in any order.
+  void startFrom(std::span<const uint32_t> records, uint32_t layer) {
+    active_.assign(records.begin(), records.end());
+    layer_ = layer;
+  }
   void advance(const MarchMesh& mesh);  // to layer() + 1
   std::span<const uint32_t> records() const { return active_; }
   uint32_t layer() const { return layer_; }

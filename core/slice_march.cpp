@@ -73,12 +73,24 @@ uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const 
   uint32_t* stamp = scratch.stamp.data();
   const MarchFacet* rec = records.data();
   uint32_t openCount = 0;
+  // The walk is a chain of dependent loads (each record names the next). The previous layer's walk
+  // visited nearly the same records in nearly the same order, so prefetching along it hides most of
+  // the latency; a wrong guess costs only a wasted prefetch.
+  constexpr std::size_t kAhead = 16;
+  scratch.previousVisit.swap(scratch.visit);
+  scratch.visit.clear();
+  const uint32_t* hint = scratch.previousVisit.data();
+  const std::size_t hints = scratch.previousVisit.size();
+  std::size_t cursor = kAhead;
 
   for (const uint32_t start : active) {
     if (stamp[start] == mark) continue;
     uint32_t q = start;
     bool closed = false;
     for (;;) {
+      if (cursor < hints) __builtin_prefetch(rec + hint[cursor]);
+      ++cursor;
+      scratch.visit.push_back(q);
       stamp[q] = mark;
       const MarchFacet& r = rec[q];
       const unsigned mask = aboveMaskF(r.corner, zf);

@@ -2,15 +2,24 @@
 
 #include <algorithm>
 #include <atomic>
+#include <memory>
 #include <vector>
 
 #include "core/layer_ranges.h"
 #include "core/march_mesh.h"
 #include "core/slice_closest.h"
 #include "core/slice_march.h"
+#include "parallel/embree_queries.h"
 #include "parallel/parallel.h"
 
 namespace toposlice {
+
+bool parseCandidateSearch(const std::string& name, CandidateSearch& search) {
+  if (name == "sweep") search = CandidateSearch::Sweep;
+  else if (name == "embree") search = CandidateSearch::Embree;
+  else return false;
+  return true;
+}
 
 bool parseSliceMethod(const std::string& name, SliceMethod& method) {
   if (name == "cp") method = SliceMethod::ClosestPoint;
@@ -56,11 +65,13 @@ FacetLayers facetLayersParallel(std::span<const Point3f> corners, std::span<cons
 // One mesh's slicing state inside a band (or the whole run, for sr-lazy).
 struct MeshState {
   FacetLayers layers;
+  std::unique_ptr<FacetBvh> bvh;   // CandidateSearch::Embree
   MarchMesh march;                 // sr
   std::vector<int32_t> lazyTable;  // sr-lazy
 };
 
 struct SlotMesh {
+  std::vector<uint32_t> candidates;  // BVH query results
   ActiveFacets active;
   ActiveRecords records;
   MarchScratch march;
@@ -74,14 +85,28 @@ uint32_t sliceBandLayer(const SliceMesh& mesh, const MeshState& state, SliceMeth
   if (method == SliceMethod::SelfReuse) {
     if (first) {
       slot.march.prepare(state.march.facets.size());
-      slot.records.start(state.march, k);
+      slot.march.forgetWalk();
+      if (state.bvh) {
+        startRecordsFromBvh(*state.bvh, state.march, z, k, slot.candidates);
+        slot.records.startFrom(slot.candidates, k);
+      } else {
+        slot.records.start(state.march, k);
+      }
     } else {
       slot.records.advance(state.march);
     }
     return marchRecordsLayer(state.march.facets, slot.records.records(), z, k + 1, slot.march, out);
   }
-  if (first) slot.active.start(state.layers, k);
-  else slot.active.advance(state.layers);
+  if (first && state.bvh) {
+    state.bvh->facetsCrossingPlane(z, slot.candidates);
+    std::erase_if(slot.candidates, [&](uint32_t f) { return state.layers.first[f] > state.layers.last[f] ||
+                                                            state.layers.last[f] == UINT32_MAX; });
+    slot.active.startFrom(slot.candidates, k);
+  } else if (first) {
+    slot.active.start(state.layers, k);
+  } else {
+    slot.active.advance(state.layers);
+  }
   return closestPointLayer(mesh.corners, slot.active.facets(), z, tolerance2, slot.closest, out);
 }
 
@@ -141,6 +166,9 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
   if (settings.method == SliceMethod::SelfReuseLazy)
     return sliceLazy(meshes, states, planes, settings, stages, progress);
 
+  if (settings.candidates == CandidateSearch::Embree)
+    for (std::size_t i = 0; i < meshes.size(); ++i)
+      states[i].bvh = std::make_unique<FacetBvh>(meshes[i].corners, FacetBvh::kSlabQueries);
   if (settings.method == SliceMethod::SelfReuse) {
     for (std::size_t i = 0; i < meshes.size(); ++i) {
       MeshState& state = states[i];

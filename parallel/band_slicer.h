@@ -19,6 +19,12 @@ namespace toposlice {
 
 enum class SliceMethod { ClosestPoint, SelfReuseLazy, SelfReuse };
 
+// How a band finds the facets crossing its first layer: a linear sweep over the facets sorted by first
+// layer, or a query of Embree's BVH (built once per mesh). Both give the same set; see BENCHMARKS.md for
+// which is faster (the default).
+enum class CandidateSearch { Sweep, Embree };
+bool parseCandidateSearch(const std::string& name, CandidateSearch& search);
+
 // "cp", "sr-lazy", "sr" <-> SliceMethod; parse returns false on an unknown name.
 bool parseSliceMethod(const std::string& name, SliceMethod& method);
 const char* sliceMethodName(SliceMethod method);
@@ -28,6 +34,7 @@ struct SliceSettings {
   uint32_t bandLayers = 0;       // layers per band; 0 picks a size from the layer and thread counts
   double joinTolerance = 1e-5;   // mm; cp and sr-lazy join segment ends closer than this
   double closeGaps = 0.05;       // mm; open polylines (defective meshes) are bridged up to this gap; 0: off
+  CandidateSearch candidates = CandidateSearch::Sweep;
 };
 
 struct SliceStats {

@@ -150,6 +150,23 @@ TEST(SliceAnalytic, BandSizesGiveIdenticalLayers) {
     EXPECT_TRUE(fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse, band) == reference) << band;
 }
 
+TEST(SliceAnalytic, EmbreeCandidatesGiveIdenticalLayers) {
+  FacetSoup soup = fixtures::examplePart();
+  soup.corners.push_back({1, 1, 1});  // plus a degenerate facet, which both searches must skip
+  soup.corners.push_back({1, 1, 1});
+  soup.corners.push_back({2, 1, 3});
+  const auto planes = uniformPlanes(0, 7.7, 0.05);
+  for (const SliceMethod method : {SliceMethod::SelfReuse, SliceMethod::ClosestPoint}) {
+    SliceSettings sweep;
+    sweep.method = method;
+    sweep.bandLayers = 5;
+    SliceSettings embree = sweep;
+    embree.candidates = CandidateSearch::Embree;
+    EXPECT_TRUE(fixtures::sliceToVector(soup, planes, embree) == fixtures::sliceToVector(soup, planes, sweep))
+        << sliceMethodName(method);
+  }
+}
+
 TEST(SliceAnalytic, OpenMeshGivesOpenPolylines) {
   FacetSoup soup = fixtures::sphere(1, 16, 8);
   soup.corners.erase(soup.corners.begin() + 3 * 40, soup.corners.begin() + 3 * 41);

@@ -73,6 +73,15 @@ TEST_P(SliceModels, AllMethodsAgreeAndLoopsAreValid) {
       ASSERT_TRUE(layers[k] == reference[k]) << sliceMethodName(method) << " differs from sr at layer " << k;
   }
 
+  {  // Bands started from Embree's BVH and odd band sizes: the same layers.
+    SliceSettings settings;
+    settings.candidates = CandidateSearch::Embree;
+    settings.bandLayers = 5;
+    const auto layers = fixtures::sliceToVector(soup, planes, settings);
+    for (std::size_t k = 0; k < layers.size(); ++k)
+      ASSERT_TRUE(layers[k] == reference[k]) << "Embree candidates differ at layer " << k;
+  }
+
   double totalArea = 0;
   for (std::size_t k = 0; k < reference.size(); ++k) {
     const LayerContours& layer = reference[k];

@@ -200,6 +200,9 @@ int run(int argc, char** argv) {
   slice->add_option("--on-mismatch", onMismatch, "When the model does not match the template: fail or rebuild")
       ->check(CLI::IsMember({"fail", "rebuild"}));
   slice->add_option("--band-layers", options.slice.bandLayers, "Layers per parallel band (default: automatic)");
+  std::string candidates = "sweep";
+  slice->add_option("--candidates", candidates, "How bands find their first layer's facets: sweep (default) or embree")
+      ->check(CLI::IsMember({"sweep", "embree"}));
   slice->add_option("--join-tolerance", options.slice.joinTolerance,
                     "mm; cp and sr-lazy join segment ends this close (default 1e-5)");
   std::string resolution, origin;
@@ -252,6 +255,7 @@ int run(int argc, char** argv) {
     if (*batch) return runBatch(jobPath, BatchRunOptions{common.quiet});
     options.planes = planeSpec(planes);
     parseSliceMethod(method, options.slice.method);
+    parseCandidateSearch(candidates, options.slice.candidates);
     for (const auto& o : outputs) options.outputs.emplace_back(o);
     for (const auto& f : addFeatures) options.add.emplace_back(f);
     for (const auto& f : removeFeatures) options.remove.emplace_back(f);
