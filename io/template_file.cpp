@@ -309,7 +309,8 @@ TemplateTable parseTemplate(std::span<const std::byte> bytes, const std::string&
   checkChecksum(loadLe<uint64_t>(bytes.data() + body), templateChecksum(bytes.first(body)), name);
   TemplateTable table = tableFrom(h);
   table.adjacency.resize(std::size_t{3} * h.facetCount);
-  std::memcpy(table.adjacency.data(), bytes.data() + kTemplateHeaderSize, body - kTemplateHeaderSize);
+  if (!table.adjacency.empty())  // memcpy's pointers must be valid even for zero bytes (fuzzer finding)
+    std::memcpy(table.adjacency.data(), bytes.data() + kTemplateHeaderSize, body - kTemplateHeaderSize);
   checkTable(h, table.adjacency, name);
   return table;
 }
