@@ -32,6 +32,10 @@ struct MaskJob {
   bool antiAliased = false;   // values 0..255 (coverage) rather than 0/255
   std::string printerModel;   // SL1 printerModel ("SL1", "SL1S"); empty: "SL1"
   double volumeMl = 0;        // resin volume, filled before finish if known (SL1 usedMaterial)
+  // Creation time written into archives (SL1 entry times and fileCreationTimestamp), seconds since
+  // 1970 UTC; 0: 1980-01-01. SOURCE_DATE_EPOCH, when set, overrides it. Never the clock, so the same
+  // input gives the same bytes.
+  std::int64_t created = 0;
   // SL1 exposure settings (config.ini expTime, expTimeFirst, numFade); ignored by the other formats.
   double exposureTime = 8.0;          // s
   double initialExposureTime = 35.0;  // s, first layer; faded linearly to exposureTime

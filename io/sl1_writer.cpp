@@ -66,14 +66,15 @@ double estimatedPrintTime(const MaskJob& job, uint32_t layers) {
   return total + layers * kSl1LayerOverheadS;
 }
 
-std::time_t creationTime() {
+std::time_t creationTime(const MaskJob& job) {
   if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) {
     char* end = nullptr;
     errno = 0;
     const long long v = std::strtoll(epoch, &end, 10);
     if (errno == 0 && end != epoch && *end == '\0' && v >= 0) return static_cast<std::time_t>(v);
   }
-  return std::time(nullptr);
+  constexpr std::time_t kZipEpoch = 315532800;  // 1980-01-01 00:00:00 UTC, the earliest zip time
+  return job.created > kZipEpoch ? static_cast<std::time_t>(job.created) : kZipEpoch;
 }
 
 uint32_t getLE32(const uint8_t* p) {
@@ -146,7 +147,7 @@ std::string errorText(int code) {
 class Sl1Sink final : public MaskSink {
  public:
   Sl1Sink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
-      : file_(path, overwrite), job_(job), created_(creationTime()) {
+      : file_(path, overwrite), job_(job), created_(creationTime(job)) {
     if (job.layerCount > kSl1MaxLayers) {
       throw OutputError(path.string() + ": an SL1 archive holds at most " + std::to_string(kSl1MaxLayers) +
                         " layers (5-digit layer names); this job has " + std::to_string(job.layerCount));
@@ -158,13 +159,8 @@ class Sl1Sink final : public MaskSink {
       throw OutputError(path.string() + ": cannot create " + file_.tempPath().string() + ": " +
                         std::generic_category().message(errno));
     }
-    const bool utc = std::getenv("SOURCE_DATE_EPOCH") != nullptr;
     std::tm t{};
-    if (utc) {
-      gmtime_r(&created_, &t);
-    } else {
-      localtime_r(&created_, &t);
-    }
+    gmtime_r(&created_, &t);
     info_.tmz_date.tm_sec = static_cast<uInt>(t.tm_sec);
     info_.tmz_date.tm_min = static_cast<uInt>(t.tm_min);
     info_.tmz_date.tm_hour = static_cast<uInt>(t.tm_hour);

@@ -1,6 +1,7 @@
 #include "tools/slice_job.h"
 
 #include <sys/resource.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <chrono>
@@ -21,6 +22,7 @@
 #include "io/errors.h"
 #include "io/stl_reader.h"
 #include "io/svg_writer.h"
+#include "io/threemf_writer.h"
 
 namespace toposlice {
 namespace {
@@ -35,7 +37,8 @@ std::string lowerExtension(const std::filesystem::path& path) {
   return ext;
 }
 
-std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options, const ContourJob& job) {
+std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options, const ContourJob& job,
+                                                           const FacetSoup& mesh, double layerHeight) {
   std::vector<std::unique_ptr<ContourSink>> sinks;
   for (const auto& path : options.outputs) {
     const std::string ext = lowerExtension(path);
@@ -47,8 +50,10 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
       if (!parseLayerList(options.svgLayers, job.layerCount, layers, error))
         throw InputError("--svg-layers '" + options.svgLayers + "': " + error);
       sinks.push_back(makeSvgWriter(path, job, std::move(layers), options.overwrite));
+    } else if (ext == ".3mf") {
+      sinks.push_back(makeThreeMfWriter(path, job, &mesh, options.overwrite, layerHeight));
     } else {
-      throw InputError(path.string() + ": unknown contour output type '" + ext + "' (use .cli or .svg)");
+      throw InputError(path.string() + ": unknown contour output type '" + ext + "' (use .cli, .svg or .3mf)");
     }
   }
   return sinks;
@@ -190,7 +195,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (job.name.size() > 4 && job.name.ends_with(".stl")) job.name.resize(job.name.size() - 4);
   job.bounds = result.bounds;
   job.layerCount = static_cast<uint32_t>(planes.size());
-  auto sinks = openContourSinks(options, job);
+  const bool uniform = options.planes.explicitZ.empty();
+  auto sinks = openContourSinks(options, job, soup, uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
 
   // Masks: grid, sink, and per-slot rasterizer state.
   const bool masks = !options.masks.output.empty();
@@ -204,6 +210,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
     }
     maskJob = makeMaskJob(options.masks, extent, job.name, planes);
+    // Archive timestamps come from the model file, so the same input gives the same bytes.
+    struct stat info {};
+    if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
     maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
   }
   std::unique_ptr<LayerReport> report;
