@@ -1,4 +1,4 @@
-// Batch jobs: one template, many customized variants, one JSON file (docs/TEMPLATES.md has the format
+// Batch jobs: one template, many customized variants, one JSON file (docs/FORMATS.md has the format
 // and a full example). The parser checks everything that can be checked without reading a mesh, so a
 // job with a typo fails at once rather than after hours of slicing:
 // - strict JSON (no comments), an object at the top; unknown keys, duplicate keys and wrong types are

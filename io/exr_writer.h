@@ -1,4 +1,4 @@
-// OpenEXR mask stack: a directory of single-part scanline files, one per layer (docs/MASKS.md, "EXR").
+// OpenEXR mask stack: a directory of single-part scanline files, one per layer (docs/FORMATS.md, "EXR").
 //
 // "<path>/<name>00000.exr", ...: one HALF channel "Y" holding the mask as 0..1 (pixel / 255), ZIP
 // compression (16 scanlines per block), rows top-down like the PNGs (mask row height-1 first, so +y is up

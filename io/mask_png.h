@@ -1,4 +1,4 @@
-// Mask layers as 8-bit grayscale PNG, and the PNG-directory sink (docs/MASKS.md).
+// Mask layers as 8-bit grayscale PNG, and the PNG-directory sink (docs/FORMATS.md).
 //
 // The encoder is specialised for masks, where speed matters far more than size: filter type 0 on every
 // row, one deflate block with the fixed Huffman code (RFC 1951 3.2.6), whose only matches are runs

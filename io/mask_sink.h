@@ -1,4 +1,4 @@
-// Streaming mask-stack writers: one MaskSink per output, fed one layer at a time (docs/MASKS.md).
+// Streaming mask-stack writers: one MaskSink per output, fed one layer at a time (docs/FORMATS.md).
 //
 // Contract shared by every sink:
 // - Layers arrive in order, index 0, 1, 2, ... (one thread at a time; a sink is not thread-safe), each

@@ -1,5 +1,5 @@
 // SL1 archive writer: the Prusa SL1/SL1S print file, read by PrusaSlicer (import), UVtools and the
-// printers' firmware (docs/MASKS.md, "SL1").
+// printers' firmware (docs/FORMATS.md, "SL1").
 //
 // Layout: a zip holding "<name>00000.png", "<name>00001.png", ... (8-bit grayscale, stored without
 // recompression, exactly the encodeMaskPng bytes), then config.ini and prusaslicer.ini, written at

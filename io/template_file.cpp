@@ -29,7 +29,7 @@ constexpr uint64_t kMul1 = 0x9E3779B97F4A7C15ull;
 constexpr uint64_t kMul2 = 0xD6E8FEB86659FD93ull;
 constexpr std::size_t kBlock = 32;
 
-// The format's 64-bit hash (docs/TEMPLATES.md): four lanes, each absorbing every fourth little-endian
+// The format's 64-bit hash (docs/FORMATS.md): four lanes, each absorbing every fourth little-endian
 // 64-bit word of the zero-padded input with v = xorshift32((v ^ w) * kMul2); then the lanes and the
 // length are folded together. Every step is invertible in the lane, so a change confined to one aligned
 // 8-byte word always changes the result. Streaming: every update but the last must be a whole number

@@ -1,6 +1,6 @@
 // Template files (.topo): a template's adjacency table saved once, loaded before slicing each customized
 // variant, so that variants are sliced without welding or rebuilding topology (the paper's section 4,
-// DESIGN.md "intra-model reuse"). Byte layout and load checks: docs/TEMPLATES.md.
+// DESIGN.md "intra-model reuse"). Byte layout and load checks: docs/FORMATS.md.
 //
 // Layout (little-endian): 32-byte header {magic "TOPOSLC\0", uint32 version = 1, uint32 facet count t,
 // uint32 vertex count, uint32 flags = 0, uint64 connectivity fingerprint}, then t*3 int32 adjacency
@@ -36,7 +36,7 @@ struct TemplateTable {
   friend bool operator==(const TemplateTable&, const TemplateTable&) = default;
 };
 
-// 64-bit fingerprint of a welded mesh's connectivity: the format's hash (docs/TEMPLATES.md) of the index
+// 64-bit fingerprint of a welded mesh's connectivity: the format's hash (docs/FORMATS.md) of the index
 // array as little-endian uint32 bytes. Two meshes welded from soups with the same facet order, corner
 // order and vertex sharing get the same value whatever their positions. Linear time, no allocation.
 uint64_t connectivityFingerprint(std::span<const uint32_t> facetVertices);

@@ -1,4 +1,4 @@
-// OpenVDB mask stack: one .vdb file holding one grid per slab of layers (docs/MASKS.md, "VDB").
+// OpenVDB mask stack: one .vdb file holding one grid per slab of layers (docs/FORMATS.md, "VDB").
 //
 // Grids: a MaskGrid for binary jobs (active = lit), a FloatGrid for anti-aliased ones (value pixel/255,
 // active where > 0, background 0, class fog volume). Index coordinates (i, j, k) are (pixel i, pixel j,

@@ -1,5 +1,5 @@
 // Mask-stack writers: PNG encoding, PNG directories, SL1 archives, OpenEXR stacks, OpenVDB slabs, and the
-// staging rules shared by every sink (docs/MASKS.md).
+// staging rules shared by every sink (docs/FORMATS.md).
 #include <gtest/gtest.h>
 #include <spng.h>
 #include <unistd.h>

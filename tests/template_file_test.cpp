@@ -218,7 +218,7 @@ TEST_F(TemplateFile, FingerprintFollowsConnectivityNotPositions) {
   EXPECT_NE(connectivityFingerprint({}), original);
 }
 
-// The hash is part of the file format (docs/TEMPLATES.md gives a reference implementation): these values
+// The hash is part of the file format (docs/FORMATS.md gives a reference implementation): these values
 // must never change, or files written by earlier builds stop loading.
 TEST_F(TemplateFile, HashValuesArePinned) {
   EXPECT_EQ(connectivityFingerprint({}), 0x672d6f35bd706edbull);
