@@ -242,8 +242,16 @@ int run(int argc, char** argv) {
 
   try {
     app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
+  } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
+  } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
+    return app.exit(e);
+  } catch (const CLI::ParseError& e) {
+    // Usage errors: one line, status 2 (input and I/O errors are status 1).
+    std::fprintf(stderr, "toposlice: error: %s (see toposlice --help)\n", e.what());
+    return 2;
   }
 
   ThreadLimit limit(common.threads);

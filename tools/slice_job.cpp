@@ -157,8 +157,21 @@ double peakResidentMiB() {
   return static_cast<double>(usage.ru_maxrss) / 1024.0;
 }
 
+// Two outputs with the same path would race for one name (and the first would stay behind when the
+// second fails): refused before anything is read or written.
+static void checkDistinctOutputs(const SliceJobOptions& options) {
+  std::vector<std::filesystem::path> all = options.outputs;
+  if (!options.masks.output.empty()) all.push_back(options.masks.output);
+  if (!options.report.empty()) all.push_back(options.report);
+  for (auto& p : all) p = std::filesystem::absolute(p).lexically_normal();
+  for (std::size_t i = 0; i < all.size(); ++i)
+    for (std::size_t j = i + 1; j < all.size(); ++j)
+      if (all[i] == all[j]) throw InputError(all[i].string() + ": given as more than one output");
+}
+
 SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
                            const ProgressContext* progress) {
+  checkDistinctOutputs(options);
   SliceJobResult result;
   auto start = std::chrono::steady_clock::now();
   FacetSoup soup = readStl(model);

@@ -1,0 +1,172 @@
+#include "tools/batch_plan.h"
+
+#include <algorithm>
+#include <chrono>
+#include <system_error>
+
+#include "core/weld.h"
+#include "io/errors.h"
+#include "io/stl_reader.h"
+
+namespace toposlice {
+
+BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesystem::path& jobPath, bool save) {
+  BatchTemplate t;
+  if (!job.templateFile.empty() && std::filesystem::exists(job.templateFile)) {
+    t.table = readTemplateFile(job.templateFile);
+    t.source = "loaded " + job.templateFile.string();
+  } else if (!job.templateModel.empty()) {
+    t.table = buildTemplateTable(weldCorners(readStl(job.templateModel).corners));
+    t.source = "built from " + job.templateModel.string();
+    if (save && !job.templateFile.empty()) {
+      if (!job.templateFile.parent_path().empty()) std::filesystem::create_directories(job.templateFile.parent_path());
+      writeTemplateFile(job.templateFile, t.table, false);
+      t.source += ", saved to " + job.templateFile.string();
+    }
+  } else {
+    throw InputError(jobPath.string() + ": the template table " + job.templateFile.string() +
+                     " does not exist and no template model is given to build it");
+  }
+  return t;
+}
+
+std::vector<std::filesystem::path> batchVariantOutputs(const BatchVariant& variant) {
+  std::vector<std::filesystem::path> out;
+  for (const auto* p : {&variant.contours, &variant.masks, &variant.report})
+    if (!p->empty()) out.push_back(*p);
+  return out;
+}
+
+bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
+  const auto outputs = batchVariantOutputs(variant);
+  if (outputs.empty() || job.overwrite) return false;
+  return std::all_of(outputs.begin(), outputs.end(), [](const auto& p) { return std::filesystem::exists(p); });
+}
+
+SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant, const TemplateTable& table) {
+  SliceJobOptions o;
+  o.planes.layerHeight = job.layerHeight;
+  o.planes.layers = job.layers;
+  o.planes.z0 = job.z0;
+  o.planes.explicitZ = job.explicitZ;
+  if (!o.planes.layerHeight && !o.planes.layers && o.planes.explicitZ.empty()) o.planes.layerHeight = 0.05;
+  if (!job.method.empty() && !parseSliceMethod(job.method, o.slice.method))
+    throw InputError("unknown method '" + job.method + "'");
+  if (job.joinTolerance) o.slice.joinTolerance = *job.joinTolerance;
+  o.overwrite = job.overwrite;
+  o.templateTable = &table;
+  if (!variant.contours.empty()) o.outputs.push_back(variant.contours);
+  o.masks.output = variant.masks;
+  o.masks.printer = job.printer;
+  o.masks.pixel = job.pixel;
+  if (job.resolution)
+    o.masks.resolution = std::pair<uint32_t, uint32_t>{(*job.resolution)[0], (*job.resolution)[1]};
+  if (job.origin) o.masks.origin = std::pair<double, double>{(*job.origin)[0], (*job.origin)[1]};
+  o.masks.mirrorX = job.mirrorX.value_or(false);
+  o.masks.mirrorY = job.mirrorY.value_or(false);
+  o.masks.antialias = job.antialias;
+  o.add = variant.add;
+  o.remove = variant.remove;
+  o.report = variant.report;
+  return o;
+}
+
+BatchOutcome completeBatchOutcome() {
+  BatchOutcome o;
+  o.status = "complete";
+  o.detail = "outputs exist, skipped";
+  return o;
+}
+
+BatchOutcome runBatchVariant(const BatchJob& job, const BatchVariant& variant, const TemplateTable& table,
+                             const ProgressContext* progress) {
+  BatchOutcome outcome;
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    const auto outputs = batchVariantOutputs(variant);
+    std::size_t existing = 0;
+    for (const auto& p : outputs) {
+      if (!p.parent_path().empty()) std::filesystem::create_directories(p.parent_path());
+      existing += std::filesystem::exists(p) ? 1 : 0;
+    }
+    SliceJobOptions options = batchSliceOptions(job, variant, table);
+    // Some outputs but not all: an interrupted run committed the first ones (runSliceJob commits the
+    // outputs one after another at the end). Slice again and replace them along with the missing ones:
+    // the same input gives the same bytes, and the report's resin volume needs the masks computed anyway.
+    const bool resumed = existing > 0 && !job.overwrite;
+    if (resumed) options.overwrite = true;
+    const SliceJobResult r = runSliceJob(variant.model, options, progress);
+    outcome.status = "ok";
+    outcome.layers = r.stats.layers;
+    outcome.detail = r.topology;
+    if (resumed)
+      outcome.detail += "; resumed: " + std::to_string(outputs.size() - existing) + " of " +
+                        std::to_string(outputs.size()) + " outputs were missing, the others rewritten";
+  } catch (const std::exception& e) {
+    outcome.status = "failed";
+    outcome.detail = e.what();
+  } catch (...) {
+    outcome.status = "failed";
+    outcome.detail = "unknown error";
+  }
+  outcome.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return outcome;
+}
+
+uint64_t batchVariantBytes(const BatchVariant& variant) {
+  uint64_t bytes = 0;
+  auto add = [&bytes](const std::filesystem::path& p) {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(p, ec);
+    if (!ec) bytes += size;
+  };
+  add(variant.model);
+  for (const auto& f : variant.add) add(f);
+  for (const auto& f : variant.remove) add(f);
+  return bytes;
+}
+
+std::vector<std::size_t> largestFirst(const BatchJob& job, std::vector<std::size_t> indices) {
+  std::vector<uint64_t> bytes(job.variants.size(), 0);
+  for (const std::size_t i : indices) bytes[i] = batchVariantBytes(job.variants[i]);
+  std::stable_sort(indices.begin(), indices.end(), [&](std::size_t a, std::size_t b) { return bytes[a] > bytes[b]; });
+  return indices;
+}
+
+BatchTotals batchTotals(const std::vector<BatchOutcome>& outcomes) {
+  BatchTotals t;
+  for (const auto& o : outcomes) {
+    t.failed += o.status == "failed";
+    t.complete += o.status == "complete";
+    if (o.status == "ok") {
+      ++t.sliced;
+      t.layers += o.layers;
+    }
+  }
+  return t;
+}
+
+void printBatchSummary(std::FILE* out, const BatchJob& job, const BatchTemplate& tmpl,
+                       const std::vector<BatchOutcome>& outcomes, double totalSeconds, bool withRank,
+                       const std::string& totalsSuffix) {
+  const BatchTotals t = batchTotals(outcomes);
+  std::fprintf(out, "template   : %u facets, table %s\n", tmpl.table.facetCount, tmpl.source.c_str());
+  for (std::size_t i = 0; i < outcomes.size() && i < job.variants.size(); ++i) {
+    const BatchOutcome& o = outcomes[i];
+    if (withRank) {
+      const std::string rank = o.rank >= 0 ? std::to_string(o.rank) : "-";
+      std::fprintf(out, "%-10s : %-8s %7.2f s  rank %-3s %s\n", job.variants[i].name.c_str(), o.status.c_str(),
+                   o.seconds, rank.c_str(), o.detail.c_str());
+    } else {
+      std::fprintf(out, "%-10s : %-8s %7.2f s  %s\n", job.variants[i].name.c_str(), o.status.c_str(), o.seconds,
+                   o.detail.c_str());
+    }
+  }
+  std::fprintf(out, "summary    : %zu sliced, %zu already complete, %zu failed of %zu; %llu layers in %.2f s", t.sliced,
+               t.complete, t.failed, outcomes.size(), static_cast<unsigned long long>(t.layers), totalSeconds);
+  if (t.sliced > 0 && totalSeconds > 0)
+    std::fprintf(out, " (%.1f variants/min)", 60.0 * static_cast<double>(t.sliced) / totalSeconds);
+  std::fprintf(out, "%s\n", totalsSuffix.c_str());
+}
+
+}  // namespace toposlice
