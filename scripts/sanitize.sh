@@ -22,7 +22,7 @@ export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(pwd)
 if [ "$mode" = thread ]; then
   # The parallel engine: bands, pipeline, thread-count determinism, Embree queries, batch jobs.
   ctest --test-dir "$dir" --output-on-failure --parallel "$(nproc)" \
-    -R 'SliceAnalytic|SliceModels.*(femur|tibia|aligner_upper_case0_stl)|Embree|CliTool.*(Determin|Batch)'
+    -R 'SliceAnalytic|SliceModels.*(femur|tibia)|EmbreeQueries.Concurrent|CliTool.*(Determin|Batch)'
 else
   ctest --test-dir "$dir" --output-on-failure --parallel "$(nproc)" -E 'CliTool.*Interrupt'
 fi
