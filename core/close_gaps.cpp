@@ -1,12 +1,13 @@
 #include "core/close_gaps.h"
 
 #include <algorithm>
+#include <limits>
 
 #include "core/crossing.h"
 
 namespace toposlice {
 
-GapStats closeGaps(LayerContours& layer, double maxGap, GapScratch& scratch) {
+GapStats closeGaps(LayerContours& layer, double maxGap, bool closeRest, GapScratch& scratch) {
   GapStats stats;
   auto& open = scratch.open;
   open.clear();
@@ -18,28 +19,40 @@ GapStats closeGaps(LayerContours& layer, double maxGap, GapScratch& scratch) {
   auto last = [&](uint32_t o) { return layer.points[layer.loopOffsets[open[o] + 1] - 1]; };
 
   auto& candidates = scratch.candidates;
-  candidates.clear();
-  const double max2 = maxGap * maxGap;
-  for (uint32_t i = 0; i < n; ++i)
-    for (uint32_t j = 0; j < n; ++j) {
-      const double d = squaredDistance(last(i), first(j));
-      if (d <= max2) candidates.push_back({d, i, j});
-    }
-  std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
-    if (a.distance2 != b.distance2) return a.distance2 < b.distance2;
-    return a.from != b.from ? a.from < b.from : a.to < b.to;
-  });
   auto& next = scratch.next;
   auto& prev = scratch.prev;
   next.assign(n, -1);
   prev.assign(n, -1);
-  for (const auto& c : candidates) {
-    if (next[c.from] >= 0 || prev[c.to] >= 0) continue;
-    next[c.from] = static_cast<int32_t>(c.to);
-    prev[c.to] = static_cast<int32_t>(c.from);
-    ++stats.joins;
-  }
-  if (stats.joins == 0) {
+  // Greedy nearest-first matching of free ends (no successor yet) to free starts (no predecessor yet),
+  // over the pairs at most sqrt(max2) apart; ties by polyline order. Returns the joins made.
+  auto match = [&](double max2) {
+    candidates.clear();
+    for (uint32_t i = 0; i < n; ++i) {
+      if (next[i] >= 0) continue;
+      for (uint32_t j = 0; j < n; ++j) {
+        if (prev[j] >= 0) continue;
+        const double d = squaredDistance(last(i), first(j));
+        if (d <= max2) candidates.push_back({d, i, j});
+      }
+    }
+    std::sort(candidates.begin(), candidates.end(), [](const auto& a, const auto& b) {
+      if (a.distance2 != b.distance2) return a.distance2 < b.distance2;
+      return a.from != b.from ? a.from < b.from : a.to < b.to;
+    });
+    uint64_t joins = 0;
+    for (const auto& c : candidates) {
+      if (next[c.from] >= 0 || prev[c.to] >= 0) continue;
+      next[c.from] = static_cast<int32_t>(c.to);
+      prev[c.to] = static_cast<int32_t>(c.from);
+      ++joins;
+    }
+    return joins;
+  };
+  stats.joins = match(maxGap * maxGap);
+  // Then, with closeRest, the gaps wider than maxGap, nearest first: every end finds a start (there
+  // are as many free starts as free ends, its own chain's among them), so every chain closes.
+  if (closeRest) stats.selfClosed = match(std::numeric_limits<double>::infinity());
+  if (stats.joins == 0 && stats.selfClosed == 0) {
     stats.leftOpen = n;
     return stats;
   }

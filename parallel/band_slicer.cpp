@@ -124,13 +124,14 @@ SliceStats sliceLazy(std::span<const SliceMesh> meshes, std::vector<MeshState>& 
   }
   std::vector<LayerContours> out(meshes.size());
   const auto count = static_cast<uint32_t>(planes.size());
+  const bool repairs = settings.closeGaps > 0 || settings.closeRemaining;
   for (uint32_t k = 0; k < count; ++k) {
     for (std::size_t i = 0; i < meshes.size(); ++i) {
       if (k == 0) active[i].start(states[i].layers, 0);
       else active[i].advance(states[i].layers);
       GapStats gaps;
-      if (slicers[i].sliceLayer(active[i].facets(), planes[k], k, out[i]) > 0 && settings.closeGaps > 0)
-        gaps = closeGaps(out[i], settings.closeGaps, gapScratch[i]);
+      if (slicers[i].sliceLayer(active[i].facets(), planes[k], k, out[i]) > 0 && repairs)
+        gaps = closeGaps(out[i], settings.closeGaps, settings.closeRemaining, gapScratch[i]);
       if (i == 0) stats.gaps += gaps;
     }
     if (stages.process) stages.process(k, out, 0, 0);
@@ -185,6 +186,7 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
   const std::size_t bands = (layerCount + band - 1) / band;
   const std::size_t meshCount = meshes.size();
   const double tolerance2 = settings.joinTolerance * settings.joinTolerance;
+  const bool repairs = settings.closeGaps > 0 || settings.closeRemaining;
 
   struct Slot {
     std::vector<SlotMesh> mesh;
@@ -210,8 +212,8 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
             LayerContours& out = slot.out[position * meshCount + i];
             const uint32_t open = sliceBandLayer(meshes[i], states[i], settings.method, k, k == k0, planes[k],
                                                  tolerance2, slot.mesh[i], out);
-            if (open > 0 && settings.closeGaps > 0) {
-              const GapStats gaps = closeGaps(out, settings.closeGaps, slot.mesh[i].gaps);
+            if (open > 0 && repairs) {
+              const GapStats gaps = closeGaps(out, settings.closeGaps, settings.closeRemaining, slot.mesh[i].gaps);
               if (i == 0) slot.gaps[position] = gaps;
             }
           }

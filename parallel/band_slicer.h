@@ -33,7 +33,8 @@ struct SliceSettings {
   SliceMethod method = SliceMethod::SelfReuse;
   uint32_t bandLayers = 0;       // layers per band; 0 picks a size from the layer and thread counts
   double joinTolerance = 1e-5;   // mm; cp and sr-lazy join segment ends closer than this
-  double closeGaps = 0.05;       // mm; open polylines (defective meshes) are bridged up to this gap; 0: off
+  double closeGaps = 0.05;       // mm; open polylines (defective meshes) are bridged up to this gap
+  bool closeRemaining = true;    // then close what is still open on itself (close_gaps.h)
   CandidateSearch candidates = CandidateSearch::Sweep;
 };
 

@@ -120,9 +120,10 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
                 static_cast<unsigned long long>(r.edges.inconsistent));
   // Every repair, per kind, so nothing is changed silently.
   std::printf("repairs    : %llu degenerate facets skipped; %llu gaps bridged (<= %g mm) closing %llu loops, "
-              "%llu polylines left open; orientation %s\n",
+              "%llu wider gaps closed, %llu polylines left open; orientation %s\n",
               static_cast<unsigned long long>(r.degenerateFacets), static_cast<unsigned long long>(r.stats.gaps.joins),
               options.slice.closeGaps, static_cast<unsigned long long>(r.stats.gaps.closedLoops),
+              static_cast<unsigned long long>(r.stats.gaps.selfClosed),
               static_cast<unsigned long long>(r.stats.openPolylines),
               r.flipped ? "flipped (the mesh was inside out)"
                         : (r.inverted ? "INSIDE OUT (negative volume; use --fix-orientation)" : "ok"));
@@ -224,6 +225,9 @@ int run(int argc, char** argv) {
   slice->add_option("--report", reportPath, "Per-layer CSV report: z, area, loops, islands; resin volume");
   slice->add_option("--close-gaps", options.slice.closeGaps,
                     "mm; bridge open contour ends of defective meshes up to this gap (default 0.05, 0: off)");
+  bool keepOpen = false;
+  slice->add_flag("--keep-open", keepOpen,
+                  "Leave polylines open that no gap within --close-gaps closes (default: close the wider gaps too)");
   slice->add_flag("--fix-orientation", options.fixOrientation, "Flip an inside-out mesh (negative volume)");
   slice->add_flag("-f,--force", options.overwrite, "Overwrite existing outputs");
 
@@ -264,6 +268,7 @@ int run(int argc, char** argv) {
     options.planes = planeSpec(planes);
     parseSliceMethod(method, options.slice.method);
     parseCandidateSearch(candidates, options.slice.candidates);
+    options.slice.closeRemaining = !keepOpen;
     for (const auto& o : outputs) options.outputs.emplace_back(o);
     for (const auto& f : addFeatures) options.add.emplace_back(f);
     for (const auto& f : removeFeatures) options.remove.emplace_back(f);
