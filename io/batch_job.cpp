@@ -284,7 +284,7 @@ class JobParser {
     object(*v, at);
     checkKeys(*v, at,
               {"layer_height", "layers", "z0", "z", "method", "join_tolerance", "printer", "pixel", "origin",
-               "resolution", "mirror", "antialias", "threads", "overwrite"});
+               "resolution", "mirror", "antialias", "cli_binary", "threads", "overwrite"});
     const auto key = [&](std::string_view k) { return childPath(at, k); };
     if (const Json* x = find(*v, "layer_height")) job_.layerHeight = positive(*x, key("layer_height"));
     if (const Json* x = find(*v, "layers")) {
@@ -342,6 +342,7 @@ class JobParser {
       job_.mirrorY = mirror.find('y') != std::string::npos;
     }
     if (const Json* x = find(*v, "antialias")) job_.antialias = boolean(*x, key("antialias"));
+    if (const Json* x = find(*v, "cli_binary")) job_.cliBinary = boolean(*x, key("cli_binary"));
     if (const Json* x = find(*v, "threads"))
       job_.threads = static_cast<uint32_t>(whole(*x, key("threads"), 0, 4096));
     if (const Json* x = find(*v, "overwrite")) job_.overwrite = boolean(*x, key("overwrite"));

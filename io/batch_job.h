@@ -48,6 +48,7 @@ struct BatchJob {
   std::optional<std::array<uint32_t, 2>> resolution;  // width, height in pixels
   std::optional<bool> mirrorX, mirrorY;               // set together by "mirror"; unset: the printer's
   bool antialias = false;                             // anti-aliased masks (else binary)
+  bool cliBinary = false;                             // .cli contours in binary CLI (else ASCII)
   uint32_t threads = 0;                               // 0: all cores
   bool overwrite = false;                             // replace existing outputs
   std::vector<BatchVariant> variants;                 // at least one

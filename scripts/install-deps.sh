@@ -7,6 +7,7 @@ packages=(
   zlib1g-dev libspng-dev libzip-dev libminizip-dev nlohmann-json3-dev libcli11-dev lib3mf-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   openexr libopenvdb-tools
+  openmpi-bin libopenmpi-dev
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -54,6 +54,7 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
     throw InputError("unknown method '" + job.method + "'");
   if (job.joinTolerance) o.slice.joinTolerance = *job.joinTolerance;
   o.overwrite = job.overwrite;
+  o.cliBinary = job.cliBinary;
   o.templateTable = &table;
   if (!variant.contours.empty()) o.outputs.push_back(variant.contours);
   o.masks.output = variant.masks;

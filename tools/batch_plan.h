@@ -1,9 +1,9 @@
-// The pieces of a batch run that do not depend on how variants are dispatched, shared by the
-// single-machine runner (`toposlice batch`, tools/batch_command.cpp) and the MPI runner
-// (`toposlice-mpi batch`, tools/mpi_batch.cpp): the template table, the slicing options of a variant,
-// completion checks, one variant's run with its failure caught, the dispatch order and the summary.
-// Both runners go through these, so a variant is sliced with the same options (and gives the same
-// bytes) whichever runner or rank slices it.
+// The pieces of a batch run that do not depend on how variants are dispatched, for the MPI runner
+// (`toposlice-mpi batch`, tools/mpi_batch.cpp) and the single-machine runner (`toposlice batch`,
+// tools/batch_command.cpp, whose private copies of the same logic these replace): the template table,
+// the slicing options of a variant, completion checks, one variant's run with its failure caught, the
+// dispatch order and the summary. Going through one copy, a variant is sliced with the same options
+// (and gives the same bytes) whichever runner or rank slices it.
 #pragma once
 
 #include <cstdint>

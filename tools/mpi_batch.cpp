@@ -1,5 +1,6 @@
-// toposlice-mpi: a batch job (docs/TEMPLATES.md) spread over the ranks of an MPI job, one or many
-// machines. Usage: mpirun -np N toposlice-mpi batch JOB.json [--threads T] [--quiet] [--dispatch-only]
+// toposlice-mpi: a batch job (docs/FORMATS.md, "Batch jobs") spread over the ranks of an MPI job, on
+// one machine or many (README, "Many machines (MPI)").
+// Usage: mpirun -np N toposlice-mpi batch JOB.json [--threads T] [--quiet] [--dispatch-only]
 //
 // Every rank reads the job and loads the template table once (rank 0 first builds and saves it when
 // the table file does not exist yet, then tells the others to go on), and slices whole variants with
@@ -16,7 +17,7 @@
 // Rank 0 works too: a second thread on rank 0 takes variants from the same queue and slices them,
 // while rank 0's main thread is the dispatcher (the only thread that calls MPI, so MPI_THREAD_FUNNELED
 // is enough). With -np N there are N slicing ranks, with -np 1 the program is the single-machine
-// runner. The dispatcher never blocks inside MPI: Open MPI waits by spinning a core, which would take
+// runner. No rank ever blocks inside MPI: Open MPI waits by spinning a core, which would take
 // a core from the slicer beside it (and from the other ranks on an oversubscribed machine), so every
 // wait here is a test-and-sleep loop (MPI_Iprobe, MPI_Test on nonblocking operations) costing about
 // nothing; a request waits at most a millisecond, against seconds per variant. --dispatch-only keeps
@@ -241,20 +242,25 @@ int runDispatcher(const Options& options, int size, int provided) {
   const bool threadOk = provided >= MPI_THREAD_FUNNELED;
   LocalResults local;
   std::thread slicer;
-  auto sliceLocally = [&] {
+  // inlineRecord: on the dispatcher's own thread (-np 1), which then records each outcome at once.
+  auto sliceLocally = [&](bool inlineRecord) {
     while (const auto i = queue.pop()) {
       BatchOutcome o = runBatchVariant(job, job.variants[*i], tmpl.table, nullptr);
       o.rank = 0;
+      if (inlineRecord) {
+        record(*i, std::move(o));
+        continue;
+      }
       std::lock_guard lock(local.mutex);
       local.ready.emplace_back(*i, std::move(o));
     }
     local.finished = true;
   };
   if (size == 1 || !threadOk) {
-    if (size == 1) sliceLocally();
+    if (size == 1) sliceLocally(true);
     local.finished = true;
   } else if (localThread) {
-    slicer = std::thread(sliceLocally);
+    slicer = std::thread(sliceLocally, false);
   } else {
     local.finished = true;
   }
@@ -356,15 +362,25 @@ int run(int argc, char** argv) {
   Options options;
   std::string jobPath;
   CLI::App* batch = app.add_subcommand("batch", "Slice every variant of a batch job on every rank");
-  batch->add_option("job", jobPath, "Batch job (JSON, see docs/TEMPLATES.md)")->required();
+  batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
   batch->add_option("--threads", options.threads, "Worker threads per rank (default: all cores)");
   batch->add_flag("-q,--quiet", options.quiet, "No progress lines or summary, errors only");
   batch->add_flag("--dispatch-only", options.dispatchOnly, "Rank 0 hands out variants but slices none (with -np > 1)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    // Every rank parses the same command line; rank 0 alone says what was wrong.
-    const int code = rank == 0 ? app.exit(e) : (e.get_exit_code());
+    // Every rank parses the same command line; rank 0 alone answers. As in toposlice: help and version
+    // as CLI11 prints them, a usage error as one line with status 2.
+    const bool informational = dynamic_cast<const CLI::CallForHelp*>(&e) != nullptr ||
+                               dynamic_cast<const CLI::CallForAllHelp*>(&e) != nullptr ||
+                               dynamic_cast<const CLI::CallForVersion*>(&e) != nullptr;
+    int code = informational ? e.get_exit_code() : 2;
+    if (rank == 0) {
+      if (informational)
+        code = app.exit(e);
+      else
+        std::fprintf(stderr, "toposlice-mpi: error: %s (see toposlice-mpi --help)\n", e.what());
+    }
     MPI_Finalize();
     return code;
   }
