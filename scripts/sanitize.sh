@@ -13,7 +13,7 @@ case "$mode" in
 esac
 ./scripts/install-deps.sh
 dir=build-$mode
-cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
+cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1" \
   -DTOPOSLICE_WERROR=ON -DTOPOSLICE_BUILD_BENCH=OFF -DTOPOSLICE_SANITIZE="$sanitize" >/dev/null
 cmake --build "$dir" --parallel "$(nproc)"
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
