@@ -50,6 +50,13 @@ class MaskSink {
   virtual bool wantsPng() const { return false; }
   // Layer `index` (0-based, in order) cut at height z (mm). `png` is encodeMaskPng(mask) or empty.
   virtual void writeLayer(uint32_t index, double z, const MaskImage& mask, std::span<const uint8_t> png) = 0;
+  // The same for a PNG sink, with the CRC-32 of `png` already computed (in the parallel stage), so the
+  // in-order writer does not checksum every byte again. Default: writeLayer.
+  virtual void writePngLayer(uint32_t index, double z, const MaskImage& mask, std::span<const uint8_t> png,
+                             uint32_t pngCrc32) {
+    (void)pngCrc32;
+    writeLayer(index, z, mask, png);
+  }
   // Completes the output and moves it under its final name. finalJob is the job as known at the end
   // (volumeMl filled); the layer count written is the number of writeLayer calls. Call at most once.
   virtual void finish(const MaskJob& finalJob) = 0;

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <map>
+#include <optional>
 #include <span>
 #include <system_error>
 #include <vector>
@@ -193,6 +194,13 @@ class Sl1Sink final : public MaskSink {
     ++next_;
   }
 
+  void writePngLayer(uint32_t index, double z, const MaskImage& mask, std::span<const uint8_t> png,
+                     uint32_t pngCrc32) override {
+    if (png.empty() || index != next_ || index >= kSl1MaxLayers) return writeLayer(index, z, mask, png);
+    addEntry(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), png, pngCrc32);
+    ++next_;
+  }
+
   void finish(const MaskJob& finalJob) override {
     MaskJob job = finalJob;
     job.name = job_.name;  // the PNG names already written fix jobDir
@@ -208,15 +216,18 @@ class Sl1Sink final : public MaskSink {
   }
 
  private:
-  void addEntry(const std::string& name, std::span<const uint8_t> data) {
+  // With a known CRC-32 the entry is written raw (minizip does not checksum the bytes again).
+  void addEntry(const std::string& name, std::span<const uint8_t> data,
+                std::optional<uint32_t> crc = std::nullopt) {
     // Stored (method 0), names flagged UTF-8 (general purpose bit 11). Entries are far below 4 GiB, so
     // no per-entry Zip64 fields; minizip adds them for offsets past 4 GiB.
     constexpr uLong kUtf8Names = 1u << 11;
+    const int raw = crc ? 1 : 0;
     int rc =
-        zipOpenNewFileInZip4_64(zip_, name.c_str(), &info_, nullptr, 0, nullptr, 0, nullptr, 0, 0, 0,
+        zipOpenNewFileInZip4_64(zip_, name.c_str(), &info_, nullptr, 0, nullptr, 0, nullptr, 0, 0, raw,
                                 -MAX_WBITS, DEF_MEM_LEVEL, Z_DEFAULT_STRATEGY, nullptr, 0, 0, kUtf8Names, 0);
     if (rc == ZIP_OK) rc = zipWriteInFileInZip(zip_, data.data(), static_cast<unsigned>(data.size()));
-    if (rc == ZIP_OK) rc = zipCloseFileInZip(zip_);
+    if (rc == ZIP_OK) rc = crc ? zipCloseFileInZipRaw64(zip_, data.size(), *crc) : zipCloseFileInZip(zip_);
     if (rc != ZIP_OK) {
       throw OutputError(file_.finalPath().string() + ": cannot write " + name + ": " + errorText(rc));
     }

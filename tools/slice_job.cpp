@@ -2,6 +2,7 @@
 
 #include <sys/resource.h>
 #include <sys/stat.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <chrono>
@@ -237,6 +238,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
 
   struct LayerResult {
     std::vector<uint8_t> payload;  // PNG bytes or mask runs
+    uint32_t crc = 0;              // CRC-32 of a PNG payload (zip entries need it)
     double area = 0;
     uint64_t islands = 0;
   };
@@ -277,15 +279,19 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster, &lit);
       r.area = static_cast<double>(lit) * maskJob.grid.pixel * maskJob.grid.pixel;
     }
-    if (png) encodeMaskPng(s.mask, r.payload);
-    else encodeMaskRuns(s.mask, r.payload);
+    if (png) {
+      encodeMaskPng(s.mask, r.payload);
+      r.crc = static_cast<uint32_t>(crc32_z(0, r.payload.data(), r.payload.size()));
+    } else {
+      encodeMaskRuns(s.mask, r.payload);
+    }
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot, uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
     for (auto& sink : sinks) sink->writeLayer(k, layer[0]);
     if (maskSink) {
       if (png) {
-        maskSink->writeLayer(k, planes[k], decoded, r.payload);
+        maskSink->writePngLayer(k, planes[k], decoded, r.payload, r.crc);
       } else {
         decodeMaskRuns(r.payload, decoded);
         maskSink->writeLayer(k, planes[k], decoded, {});
