@@ -874,6 +874,14 @@ TEST_F(CliToolInterrupt, SigtermDuringSl1OutputLeavesNothing) {
                     SIGTERM, path("big.sl1"), r);
 }
 
+TEST_F(CliToolInterrupt, SigtermDuringPngFolderOutputLeavesNothing) {
+  RunResult r;
+  interruptAndCheck(*this,
+                    {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001", "--masks",
+                     "bigpng", "--printer", "sl1", "-q"},
+                    SIGTERM, path("bigpng"), r);
+}
+
 TEST_F(CliToolInterrupt, SigintDuringBinaryCliOutputLeavesNothing) {
   RunResult r;
   interruptAndCheck(*this,

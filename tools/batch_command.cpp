@@ -9,6 +9,7 @@
 #include "parallel/parallel.h"
 #include "tools/batch_plan.h"
 #include "tools/progress_bar.h"
+#include "tools/slice_job.h"
 
 namespace toposlice {
 
@@ -21,6 +22,7 @@ int runBatch(const std::filesystem::path& jobPath, const BatchRunOptions& option
   std::vector<BatchOutcome> outcomes(job.variants.size());
   ProgressBar bar("batch", options.quiet);
   for (std::size_t i = 0; i < job.variants.size(); ++i) {
+    if (interruptRequested()) break;  // the rest stays to do: a re-run finishes the job
     const BatchVariant& v = job.variants[i];
     if (batchVariantComplete(job, v)) {
       outcomes[i] = completeBatchOutcome();

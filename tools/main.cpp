@@ -23,13 +23,28 @@
 namespace toposlice {
 namespace {
 
-std::atomic<bool> gCancel{false};
+volatile std::sig_atomic_t gSignal = 0;
 
+// First SIGINT/SIGTERM: ask the running job to stop at the next band; it unwinds, every temporary
+// (files and staged folders) is removed by its owner, and run() then dies by the same signal. A second
+// signal stops at once, removing the temporary files it can from the handler.
 extern "C" void onSignal(int signal) {
-  // Leave no partial output behind: remove the temporaries, then die by the same signal.
-  removePendingOutputs();
-  std::signal(signal, SIG_DFL);
-  std::raise(signal);
+  if (gSignal != 0) {
+    removePendingOutputs();
+    std::signal(signal, SIG_DFL);
+    std::raise(signal);
+    return;
+  }
+  gSignal = signal;
+  interruptRequested().store(true);
+}
+
+// After an interrupted command has cleaned up: end by the signal, as the shell expects.
+void endIfInterrupted() {
+  if (gSignal == 0) return;
+  std::fprintf(stderr, "toposlice: interrupted; no output was left behind\n");
+  std::signal(gSignal, SIG_DFL);
+  std::raise(gSignal);
 }
 
 struct CommonOptions {
@@ -148,7 +163,6 @@ int runSlice(const std::string& model, const SliceJobOptions& options, const Com
   ProgressBar bar("slicing", common.quiet);
   ProgressContext progress;
   progress.report = [&](uint64_t done, uint64_t total) { bar.update(done, total); };
-  progress.cancel = &gCancel;
   const SliceJobResult result = runSliceJob(model, options, &progress);
   bar.update(result.stats.layers, result.stats.layers);
   if (!common.quiet) printSliceSummary(model, options, result);
@@ -261,7 +275,7 @@ int run(int argc, char** argv) {
   ThreadLimit limit(common.threads);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
-  try {
+  auto runCommand = [&]() -> int {
     if (*info) return runInfo(model);
     if (*templ) return runTemplate(model, templateOut, templateForce, common.quiet);
     if (*batch) return runBatch(jobPath, BatchRunOptions{common.quiet});
@@ -294,7 +308,13 @@ int run(int argc, char** argv) {
       options.templateTable = &table;
     }
     return runSlice(model, options, common);
+  };
+  try {
+    const int status = runCommand();
+    endIfInterrupted();
+    return status;
   } catch (const std::exception& e) {
+    endIfInterrupted();
     std::fprintf(stderr, "toposlice: error: %s\n", e.what());
     return 1;
   }

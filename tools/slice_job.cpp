@@ -152,6 +152,11 @@ MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::
 
 }  // namespace
 
+std::atomic<bool>& interruptRequested() {
+  static std::atomic<bool> requested{false};
+  return requested;
+}
+
 double peakResidentMiB() {
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
@@ -302,7 +307,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   };
 
   start = std::chrono::steady_clock::now();
-  result.stats = sliceMeshes(meshes, planes, options.slice, stages, progress);
+  ProgressContext context = progress ? *progress : ProgressContext{};
+  context.cancel = &interruptRequested();
+  result.stats = sliceMeshes(meshes, planes, options.slice, stages, &context);
   if (result.stats.cancelled) throw InputError("interrupted");
   result.volumeMl = volumeMm3 / 1000.0;
   for (auto& sink : sinks) sink->finish();

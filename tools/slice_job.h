@@ -3,6 +3,7 @@
 // `toposlice batch`.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <filesystem>
 #include <optional>
@@ -64,6 +65,10 @@ struct SliceJobResult {
 // cancellation no output is left under its final name.
 SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
                            const ProgressContext* progress);
+
+// Set from a signal handler (lock-free, so async-signal-safe) to ask running slice jobs to stop at the
+// next band; the job then throws, and unwinding removes every temporary output.
+std::atomic<bool>& interruptRequested();
 
 // Peak resident memory of this process so far, in MiB.
 double peakResidentMiB();
