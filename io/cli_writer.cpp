@@ -11,6 +11,7 @@
 #include <type_traits>
 
 #include "io/output_file.h"
+#include "io/text_buffer.h"
 
 // Source: Common Layer Interface (CLI) specification, version 2.00, binary section, cross-checked against
 // independent CLI readers: commands are uint16, "start layer long" = 127 (real z), "start polyline long"
@@ -31,30 +32,9 @@ constexpr int kDecimals = 6;
 // Longest fixed-notation double with kDecimals decimals: sign, 309 digits, point, decimals.
 constexpr std::size_t kMaxFixedChars = 1 + 309 + 1 + kDecimals;
 
-// Growable byte buffer without zero-filling; reused from layer to layer.
-class ByteBuffer {
+// The CLI writer's buffer: TextBuffer plus the format's fixed-decimal numbers.
+class ByteBuffer : public TextBuffer {
  public:
-  char* data() { return data_.get(); }
-  std::size_t size() const { return size_; }
-  void clear() { size_ = 0; }
-  // Makes room for `extra` more bytes and returns where they go.
-  char* reserveMore(std::size_t extra) {
-    if (size_ + extra > capacity_) grow(size_ + extra);
-    return data_.get() + size_;
-  }
-  void setEnd(char* end) { size_ = static_cast<std::size_t>(end - data_.get()); }
-  void append(std::string_view s) {
-    std::memcpy(reserveMore(s.size()), s.data(), s.size());
-    size_ += s.size();
-  }
-  void append(char c) {
-    *reserveMore(1) = c;
-    ++size_;
-  }
-  void appendInt(int64_t v) {
-    char* p = reserveMore(24);
-    setEnd(std::to_chars(p, p + 24, v).ptr);
-  }
   // Fixed notation, kDecimals decimals; a value that rounds to zero is written without a minus sign.
   void appendFixed(double v) {
     char* p = reserveMore(kMaxFixedChars);
@@ -69,19 +49,6 @@ class ByteBuffer {
     }
     setEnd(end);
   }
-
- private:
-  void grow(std::size_t need) {
-    std::size_t capacity = capacity_ < (std::size_t{1} << 16) ? (std::size_t{1} << 16) : capacity_ * 2;
-    if (capacity < need) capacity = need;
-    auto bigger = std::make_unique_for_overwrite<char[]>(capacity);
-    if (size_ > 0) std::memcpy(bigger.get(), data_.get(), size_);
-    data_ = std::move(bigger);
-    capacity_ = capacity;
-  }
-  std::unique_ptr<char[]> data_;
-  std::size_t capacity_ = 0;
-  std::size_t size_ = 0;
 };
 
 template <typename T>

@@ -30,6 +30,7 @@
 #include "core/weld.h"
 #include "io/errors.h"
 #include "io/output_file.h"
+#include "io/text_buffer.h"
 
 namespace toposlice {
 namespace {
@@ -54,27 +55,9 @@ constexpr std::string_view kRootRels =
     "Type=\"http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel\"/>\n"
     "</Relationships>\n";
 
-// Growable text buffer without zero-filling; reused from layer to layer.
-class Text {
+// The 3MF writer's text: TextBuffer plus the format's number forms.
+class Text : public TextBuffer {
  public:
-  const char* data() const { return data_.get(); }
-  std::size_t size() const { return size_; }
-  bool empty() const { return size_ == 0; }
-  void clear() { size_ = 0; }
-  void swap(Text& other) noexcept {
-    std::swap(data_, other.data_);
-    std::swap(capacity_, other.capacity_);
-    std::swap(size_, other.size_);
-  }
-  void append(std::string_view s) {
-    std::memcpy(reserveMore(s.size()), s.data(), s.size());
-    size_ += s.size();
-  }
-  void append(const Text& t) { append(std::string_view(t.data(), t.size())); }
-  void appendUint(uint64_t v) {
-    char* p = reserveMore(24);
-    setEnd(std::to_chars(p, p + 24, v).ptr);
-  }
   // Fixed notation with at most 6 decimals (correctly rounded), trailing zeros and a bare point
   // dropped, never "-0".
   void appendDecimal(double v) {
@@ -100,22 +83,6 @@ class Text {
     }
     return end;
   }
-  char* reserveMore(std::size_t extra) {
-    if (size_ + extra > capacity_) grow(size_ + extra);
-    return data_.get() + size_;
-  }
-  void setEnd(char* end) { size_ = static_cast<std::size_t>(end - data_.get()); }
-  void grow(std::size_t need) {
-    std::size_t capacity = std::max(capacity_ * 2, std::size_t{1} << 16);
-    if (capacity < need) capacity = need;
-    auto bigger = std::make_unique_for_overwrite<char[]>(capacity);
-    if (size_ > 0) std::memcpy(bigger.get(), data_.get(), size_);
-    data_ = std::move(bigger);
-    capacity_ = capacity;
-  }
-  std::unique_ptr<char[]> data_;
-  std::size_t capacity_ = 0;
-  std::size_t size_ = 0;
 };
 
 // XML attribute text: printable ASCII, escaped; other bytes become '_'; "part" when empty.
