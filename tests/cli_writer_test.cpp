@@ -19,6 +19,7 @@
 #include "core/contours.h"
 #include "io/cli_writer.h"
 #include "io/errors.h"
+#include "tests/fixtures/scratch_dir.h"
 #include "io/output_file.h"
 
 namespace toposlice {
@@ -26,37 +27,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A fresh, empty directory per test, removed afterwards.
-class ScratchDir {
- public:
-  ScratchDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() / ("toposlice_" + std::string(info->test_suite_name()) + "_" +
-                                         info->name() + "_" + std::to_string(::getpid()));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~ScratchDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  const fs::path& path() const { return path_; }
-  fs::path operator/(const std::string& name) const { return path_ / name; }
-  std::vector<std::string> entries() const {
-    std::vector<std::string> names;
-    for (const auto& e : fs::directory_iterator(path_)) names.push_back(e.path().filename().string());
-    std::sort(names.begin(), names.end());
-    return names;
-  }
-
- private:
-  fs::path path_;
-};
-
-std::string readFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
+using fixtures::ScratchDir;
+using fixtures::readFile;
 
 void writeText(const fs::path& p, const std::string& text) {
   std::ofstream out(p, std::ios::binary);

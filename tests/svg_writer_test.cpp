@@ -12,6 +12,7 @@
 
 #include "core/contours.h"
 #include "io/errors.h"
+#include "tests/fixtures/scratch_dir.h"
 #include "io/svg_writer.h"
 
 namespace toposlice {
@@ -19,32 +20,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-class SvgScratchDir {
- public:
-  SvgScratchDir() {
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    path_ = fs::temp_directory_path() / ("toposlice_" + std::string(info->test_suite_name()) + "_" +
-                                         info->name() + "_" + std::to_string(::getpid()));
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~SvgScratchDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  fs::path operator/(const std::string& name) const { return path_ / name; }
-  std::size_t count() const {
-    return static_cast<std::size_t>(std::distance(fs::directory_iterator(path_), fs::directory_iterator()));
-  }
-
- private:
-  fs::path path_;
-};
-
-std::string readFile(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
+using fixtures::ScratchDir;
+using fixtures::readFile;
 
 std::size_t countOf(const std::string& text, const std::string& what) {
   std::size_t n = 0;
@@ -88,7 +65,7 @@ void writeSample(const fs::path& path, std::vector<uint32_t> chosen, bool overwr
 }
 
 TEST(SvgWriter, OnePanelPerChosenLayer) {
-  SvgScratchDir dir;
+  ScratchDir dir;
   writeSample(dir / "s.svg", {4, 0, 2, 2, 9});  // unsorted, a duplicate, one out of range
   const std::string svg = readFile(dir / "s.svg");
   EXPECT_EQ(svg.rfind("<?xml", 0), 0u);
@@ -110,7 +87,7 @@ TEST(SvgWriter, OnePanelPerChosenLayer) {
 }
 
 TEST(SvgWriter, HolesAndOpenLinesStyledApart) {
-  SvgScratchDir dir;
+  ScratchDir dir;
   writeSample(dir / "s.svg", {1});
   const std::string svg = readFile(dir / "s.svg");
   // One filled path per panel holding both closed loops, nonzero so the hole stays empty.
@@ -137,7 +114,7 @@ TEST(SvgWriter, HolesAndOpenLinesStyledApart) {
 }
 
 TEST(SvgWriter, EmptySelectionAndEmptyLayer) {
-  SvgScratchDir dir;
+  ScratchDir dir;
   {
     auto sink = makeSvgWriter(dir / "none.svg", sampleJob(2), {}, false);
     sink->writeLayer(0, sampleLayer(0.05));
@@ -158,7 +135,7 @@ TEST(SvgWriter, EmptySelectionAndEmptyLayer) {
 }
 
 TEST(SvgWriter, DeterministicAndAtomic) {
-  SvgScratchDir dir;
+  ScratchDir dir;
   writeSample(dir / "a.svg", {0, 2});
   writeSample(dir / "b.svg", {2, 0});
   EXPECT_EQ(readFile(dir / "a.svg"), readFile(dir / "b.svg"));
@@ -173,7 +150,7 @@ TEST(SvgWriter, DeterministicAndAtomic) {
 }
 
 TEST(SvgWriter, ExistingFileNeedsOverwrite) {
-  SvgScratchDir dir;
+  ScratchDir dir;
   writeSample(dir / "a.svg", {0});
   try {
     writeSample(dir / "a.svg", {1});
