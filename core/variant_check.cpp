@@ -159,7 +159,8 @@ std::optional<VariantMismatch> checkVariantConnectivity(std::span<const Point3f>
     m.reason =
         "the variant has " + std::to_string(corners.size() / 3) + " facets" +
         (corners.size() % 3 != 0 ? " (and " + std::to_string(corners.size() % 3) + " extra corners)" : "") +
-        ", the template has " + std::to_string(adjacency.size() / 3);
+        ", the template has " + std::to_string(adjacency.size() / 3) +
+        ": the variant does not share the template's connectivity";
     return m;
   }
   if (screen(corners, adjacency) == 0) return std::nullopt;

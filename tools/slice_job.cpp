@@ -76,25 +76,15 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
   bool build = method == SliceMethod::SelfReuse;
   if (options.templateTable != nullptr && method != SliceMethod::ClosestPoint) {
     const TemplateTable& table = *options.templateTable;
-    std::optional<VariantMismatch> mismatch;
-    if (table.facetCount != soup.facetCount()) {
-      mismatch = VariantMismatch{kNoIndex, kNoIndex, kNoIndex,
-                                 "it has " + std::to_string(soup.facetCount()) + " facets, the template " +
-                                     std::to_string(table.facetCount)};
-    } else {
-      mismatch = checkVariantConnectivity(soup.corners, table.adjacency);
-    }
+    // Linear check (core/variant_check.h): facet count, then every adjacent pair shares its edge.
+    const std::optional<VariantMismatch> mismatch = checkVariantConnectivity(soup.corners, table.adjacency);
     if (!mismatch) {
       result.topology = "loaded from template (connectivity verified)";
       return table.adjacency;
     }
-    std::string where = mismatch->reason;
-    if (mismatch->facet != kNoIndex)
-      where = "facet " + std::to_string(mismatch->facet) + " edge " + std::to_string(mismatch->edge) +
-              " (neighbour " + std::to_string(mismatch->neighbour) + "): " + mismatch->reason;
-    if (!options.rebuildOnMismatch)
-      throw InputError(model.string() + ": does not share the template's connectivity: " + where);
-    result.topology = "template mismatch (" + where + "), rebuilt";
+    // The reason names the facet, edge and neighbour (or the facet counts) and says the connectivity differs.
+    if (!options.rebuildOnMismatch) throw InputError(model.string() + ": " + mismatch->reason);
+    result.topology = "template mismatch (" + mismatch->reason + "), rebuilt";
   }
   if (build) {
     buildTable(soup, built, &result.edges);
