@@ -3,7 +3,6 @@
 #include "core/variant_check.h"
 
 #include <gtest/gtest.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <chrono>
@@ -16,6 +15,7 @@
 
 #include "core/adjacency.h"
 #include "core/weld.h"
+#include "io/stl_reader.h"
 #include "io/template_file.h"
 
 namespace toposlice {
@@ -23,27 +23,8 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// Minimal binary STL loader (plain or gzip, through zlib) so these tests do not depend on io/stl_reader.
-FacetSoup loadBinaryStl(const fs::path& path) {
-  gzFile file = gzopen(path.c_str(), "rb");
-  if (file == nullptr) throw std::runtime_error("cannot open " + path.string());
-  gzbuffer(file, 1 << 17);
-  std::vector<unsigned char> bytes;
-  unsigned char chunk[1 << 16];
-  int n = 0;
-  while ((n = gzread(file, chunk, sizeof chunk)) > 0) bytes.insert(bytes.end(), chunk, chunk + n);
-  gzclose(file);
-  if (n < 0 || bytes.size() < 84) throw std::runtime_error("cannot read " + path.string());
-  uint32_t count = 0;
-  std::memcpy(&count, bytes.data() + 80, 4);
-  if (bytes.size() != 84 + std::size_t{50} * count)
-    throw std::runtime_error("not binary STL: " + path.string());
-  FacetSoup soup;
-  soup.corners.resize(std::size_t{3} * count);
-  for (std::size_t f = 0; f < count; ++f)
-    std::memcpy(&soup.corners[3 * f], bytes.data() + 84 + 50 * f + 12, 36);
-  return soup;
-}
+// The shared meshes through the project's STL reader (io/stl_reader.h).
+FacetSoup loadBinaryStl(const fs::path& path) { return readStl(path); }
 
 FacetSoup load(const char* name) {
   return loadBinaryStl(fs::path(TOPOSLICE_MODELS_DIR) / name);
