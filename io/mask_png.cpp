@@ -20,6 +20,7 @@
 #include <zlib.h>
 
 #include "io/errors.h"
+#include "io/output_file.h"
 #include "io/exr_writer.h"
 #include "io/sl1_writer.h"
 #include "io/vdb_writer.h"
@@ -190,16 +191,6 @@ void appendChunk(std::vector<uint8_t>& out, const char type[4], std::span<const 
 
 std::string reason(int err) {
   return std::generic_category().message(err);
-}
-
-bool pathExists(const std::filesystem::path& p) {
-  std::error_code ec;
-  const auto st = std::filesystem::symlink_status(p, ec);
-  return !ec && st.type() != std::filesystem::file_type::not_found;
-}
-
-std::string alreadyExists(const std::filesystem::path& p) {
-  return p.string() + ": already exists (use --force to overwrite)";
 }
 
 std::atomic<uint64_t> gStagedCounter{0};
@@ -442,7 +433,7 @@ std::string maskLayerFileName(const std::string& name, uint32_t index, uint32_t 
 
 StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite)
     : finalPath_(std::move(finalPath)), overwrite_(overwrite) {
-  if (!overwrite_ && pathExists(finalPath_)) throw OutputError(alreadyExists(finalPath_));
+  if (!overwrite_ && outputPathExists(finalPath_)) throw OutputError(outputExistsMessage(finalPath_));
   tempPath_ = siblingName(finalPath_, ".tmp-");
   if (::mkdir(tempPath_.c_str(), 0777) != 0) {
     throw OutputError(finalPath_.string() + ": cannot create " + tempPath_.string() + ": " + reason(errno));
@@ -464,8 +455,8 @@ void StagedDirectory::commit() {
       return;
     }
     const int err = errno;
-    if (err == EEXIST || ((err == EINVAL || err == ENOSYS) && pathExists(finalPath_))) {
-      throw OutputError(alreadyExists(finalPath_));
+    if (err == EEXIST || ((err == EINVAL || err == ENOSYS) && outputPathExists(finalPath_))) {
+      throw OutputError(outputExistsMessage(finalPath_));
     }
     if (err != EINVAL && err != ENOSYS) {
       throw OutputError(final + ": cannot rename " + temp + ": " + reason(err));
@@ -475,7 +466,7 @@ void StagedDirectory::commit() {
     committed_ = true;
     return;
   }
-  if (!overwrite_ || !pathExists(finalPath_)) {
+  if (!overwrite_ || !outputPathExists(finalPath_)) {
     throw OutputError(final + ": cannot rename " + temp + ": " + reason(errno));
   }
   // Replace an existing entry: move it aside, move ours in, then delete the old one.

@@ -51,17 +51,18 @@ std::string reason(int err) {
   return std::generic_category().message(err);
 }
 
-bool pathExists(const std::filesystem::path& p) {
+}  // namespace
+
+bool outputPathExists(const std::filesystem::path& p) {
   std::error_code ec;
   const auto st = std::filesystem::symlink_status(p, ec);
   return !ec && st.type() != std::filesystem::file_type::not_found;
 }
 
-std::string alreadyExists(const std::filesystem::path& p) {
+std::string outputExistsMessage(const std::filesystem::path& p) {
   return p.string() + ": already exists (use --force to overwrite)";
 }
 
-}  // namespace
 
 void removePendingOutputs() noexcept {
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
@@ -71,7 +72,7 @@ void removePendingOutputs() noexcept {
 
 OutputFile::OutputFile(std::filesystem::path finalPath, bool overwrite)
     : finalPath_(std::move(finalPath)), overwrite_(overwrite) {
-  if (!overwrite_ && pathExists(finalPath_)) throw OutputError(alreadyExists(finalPath_));
+  if (!overwrite_ && outputPathExists(finalPath_)) throw OutputError(outputExistsMessage(finalPath_));
   const std::uint64_t counter = gTempCounter.fetch_add(1, std::memory_order_relaxed);
   tempPath_ = finalPath_;
   tempPath_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter);
@@ -156,12 +157,12 @@ void OutputFile::commit() {
       renamed = true;
     } else if (errno == EEXIST) {
       failed_ = true;
-      throw OutputError(alreadyExists(finalPath_));
+      throw OutputError(outputExistsMessage(finalPath_));
     } else if (errno != EINVAL && errno != ENOSYS) {
       fail("cannot rename the temporary file", errno);
-    } else if (pathExists(finalPath_)) {  // file system without RENAME_NOREPLACE
+    } else if (outputPathExists(finalPath_)) {  // file system without RENAME_NOREPLACE
       failed_ = true;
-      throw OutputError(alreadyExists(finalPath_));
+      throw OutputError(outputExistsMessage(finalPath_));
     }
   }
   if (!renamed && ::rename(temp.c_str(), final.c_str()) != 0) fail("cannot rename the temporary file", errno);

@@ -21,6 +21,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
+#include <string>
 
 namespace toposlice {
 
@@ -72,5 +73,12 @@ inline constexpr std::size_t kMaxPendingOutputs = 64;
 // fixed array through lock-free atomics and calls only unlink(2). The OutputFile objects stay valid
 // (their destructors find the temporary already gone, which is fine).
 void removePendingOutputs() noexcept;
+
+// Whether anything (file, folder, link, even a dangling one) occupies `path`: the test every writer uses
+// before refusing to replace an output.
+bool outputPathExists(const std::filesystem::path& path);
+
+// "<path>: already exists (use --force to overwrite)", the one message for a refused output.
+std::string outputExistsMessage(const std::filesystem::path& path);
 
 }  // namespace toposlice
