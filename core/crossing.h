@@ -13,9 +13,11 @@
 // edge. Marching therefore leaves a facet through its up edge, and enters the neighbour through the
 // neighbour's down edge (the same geometric edge, traversed the other way).
 //
-// Crossing point: computed from the edge's below end `a` and above end `b` as a + t (b - a),
-// t = (z - a.z) / (b.z - a.z), in double. Both facets sharing an edge see the same (a, b), so every path
-// computes bit-identical points.
+// Crossing point: computed from the edge's below end `a` and above end `b` as a + (z - a.z) s, with the
+// slope s = (b - a) / (b.z - a.z), in double. Both facets sharing an edge see the same (a, b), so every
+// path computes bit-identical points; a path that keeps (a, s) for many layers (slice_follow.h) gets the
+// same bits as one that derives them afresh. (The build disables floating-point contraction, so no
+// compiler turns one of these into a fused multiply-add and another not.)
 #pragma once
 
 #include <cmath>
@@ -29,11 +31,14 @@ namespace toposlice {
 
 // Bit i set when corner i is above (or on) the plane. Codes 1..6 cross the plane; 0 and 7 do not.
 inline unsigned aboveMask(const Point3f* corners, double z) {
-  return (static_cast<double>(corners[0].z) >= z ? 1u : 0u) | (static_cast<double>(corners[1].z) >= z ? 2u : 0u) |
+  return (static_cast<double>(corners[0].z) >= z ? 1u : 0u) |
+         (static_cast<double>(corners[1].z) >= z ? 2u : 0u) |
          (static_cast<double>(corners[2].z) >= z ? 4u : 0u);
 }
 
-inline bool crossesPlane(unsigned mask) { return mask != 0 && mask != 7; }
+inline bool crossesPlane(unsigned mask) {
+  return mask != 0 && mask != 7;
+}
 
 // A facet with two equal corners (bitwise, -0.0 == +0.0) has no area and no direction: it is skipped by
 // every slicing path and by the adjacency table, and counted. (After welding, these are exactly the
@@ -47,17 +52,31 @@ inline bool isDegenerateFacet(const Point3f* c) {
 inline constexpr uint8_t kDownEdge[8] = {0, 2, 0, 0, 1, 2, 1, 0};
 inline constexpr uint8_t kUpEdge[8] = {0, 1, 2, 1, 0, 0, 2, 0};
 
-// Crossing of edge `edge` (opposite corner `edge`) of a crossed facet with plane z. Works for either
-// direction of traversal: the below end is always the base of the interpolation.
-inline Point2d edgeCrossing(const Point3f* corners, unsigned edge, double z) {
+// The line along which the crossing of one edge moves with the plane: its below end and slope.
+struct EdgeLine {
+  double sx, sy;     // (b - a) / (b.z - a.z) for x and y
+  float ax, ay, az;  // the below end a
+  Point2d at(double z) const {
+    const double d = z - static_cast<double>(az);
+    return {static_cast<double>(ax) + d * sx, static_cast<double>(ay) + d * sy};
+  }
+};
+
+// Line of edge `edge` (opposite corner `edge`) of a facet crossed by plane z. Works for either direction
+// of traversal: the below end is always the base.
+inline EdgeLine edgeLine(const Point3f* corners, unsigned edge, double z) {
   const Point3f& p = corners[edge == 2 ? 0 : edge + 1];
   const Point3f& q = corners[edge == 0 ? 2 : edge - 1];
   const bool pBelow = static_cast<double>(p.z) < z;
   const Point3f& a = pBelow ? p : q;
   const Point3f& b = pBelow ? q : p;
-  const double az = a.z;
-  const double t = (z - az) / (static_cast<double>(b.z) - az);
-  return {a.x + t * (static_cast<double>(b.x) - a.x), a.y + t * (static_cast<double>(b.y) - a.y)};
+  const double dz = static_cast<double>(b.z) - a.z;
+  return {(static_cast<double>(b.x) - a.x) / dz, (static_cast<double>(b.y) - a.y) / dz, a.x, a.y, a.z};
+}
+
+// Crossing of edge `edge` of a crossed facet with plane z.
+inline Point2d edgeCrossing(const Point3f* corners, unsigned edge, double z) {
+  return edgeLine(corners, edge, z).at(z);
 }
 
 }  // namespace toposlice

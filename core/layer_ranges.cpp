@@ -6,8 +6,36 @@
 
 namespace toposlice {
 
-void computeFacetLayerRange(std::span<const Point3f> corners, std::span<const double> planes, std::size_t begin,
-                            std::size_t end, std::span<uint32_t> first, std::span<uint32_t> last) {
+PlaneLocator::PlaneLocator(std::span<const double> planes) : planes_(planes) {
+  if (planes.size() < 2) return;
+  const double step = (planes.back() - planes.front()) / static_cast<double>(planes.size() - 1);
+  if (step > 0) {
+    origin_ = planes.front();
+    inverseStep_ = 1.0 / step;
+  }
+}
+
+uint32_t PlaneLocator::countAtOrBelow(double z) const {
+  const std::size_t n = planes_.size();
+  std::size_t k = 0;
+  if (inverseStep_ == 0) {
+    k = static_cast<std::size_t>(std::upper_bound(planes_.begin(), planes_.end(), z) - planes_.begin());
+  } else {
+    const double guess = (z - origin_) * inverseStep_ + 1.0;
+    if (guess >= static_cast<double>(n))
+      k = n;
+    else if (guess > 0)
+      k = static_cast<std::size_t>(guess);
+    while (k > 0 && planes_[k - 1] > z) --k;
+    while (k < n && planes_[k] <= z) ++k;
+  }
+  return static_cast<uint32_t>(k);
+}
+
+void computeFacetLayerRange(std::span<const Point3f> corners, std::span<const double> planes,
+                            std::size_t begin, std::size_t end, std::span<uint32_t> first,
+                            std::span<uint32_t> last) {
+  const PlaneLocator locate(planes);
   for (std::size_t f = begin; f < end; ++f) {
     const Point3f* c = &corners[3 * f];
     if (isDegenerateFacet(c)) {  // crosses nothing
@@ -17,11 +45,9 @@ void computeFacetLayerRange(std::span<const Point3f> corners, std::span<const do
     }
     const double zmin = std::min({c[0].z, c[1].z, c[2].z});
     const double zmax = std::max({c[0].z, c[1].z, c[2].z});
-    const auto lo = std::upper_bound(planes.begin(), planes.end(), zmin);  // first plane > zmin
-    const auto hi = std::upper_bound(lo, planes.end(), zmax);              // first plane > zmax
-    first[f] = static_cast<uint32_t>(lo - planes.begin());
-    // last = hi - 1; stored +1 shifted view avoided: an empty range gets first = hi, last = hi - 1.
-    last[f] = static_cast<uint32_t>(hi - planes.begin()) - 1u;
+    first[f] = locate.countAtOrBelow(zmin);  // first plane > zmin
+    // last = (first plane > zmax) - 1: an empty range gets last = first - 1 (UINT32_MAX below plane 0).
+    last[f] = locate.countAtOrBelow(zmax) - 1u;
   }
 }
 
@@ -37,7 +63,8 @@ void bucketFacetsByFirstLayer(std::size_t layerCount, FacetLayers& layers) {
   std::vector<uint32_t> fill(layers.bucketOffsets.begin(), layers.bucketOffsets.end() - 1);
   for (std::size_t f = 0; f < facetCount; ++f) {
     const uint32_t a = layers.first[f], b = layers.last[f];
-    if (a < layerCount && b != UINT32_MAX && a <= b) layers.bucketFacets[fill[a]++] = static_cast<uint32_t>(f);
+    if (a < layerCount && b != UINT32_MAX && a <= b)
+      layers.bucketFacets[fill[a]++] = static_cast<uint32_t>(f);
   }
 }
 
