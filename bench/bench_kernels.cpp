@@ -10,6 +10,7 @@
 #include "core/mesh_info.h"
 #include "core/planes.h"
 #include "core/slice_closest.h"
+#include "core/slice_follow.h"
 #include "core/slice_march.h"
 #include "core/weld.h"
 #include "io/stl_reader.h"
@@ -43,7 +44,8 @@ struct Fixture {
     planes = makePlanes(spec, box.min.z, box.max.z, error);
     layers = computeFacetLayers(soup.corners, planes);
     prepareMarchMesh(layers, soup.facetCount(), march);
-    fillMarchFacets(soup.corners, table, layers, 0, march.facets.size(), march);
+    march.missingNeighbours =
+        fillMarchFacets(soup.corners, table, layers, planes, 0, march.facets.size(), march);
   }
 };
 
@@ -68,14 +70,16 @@ BENCHMARK(BM_Weld)->Unit(benchmark::kMillisecond);
 void BM_Adjacency(benchmark::State& state) {
   const Fixture& f = fixture();
   std::vector<int32_t> table(f.soup.corners.size());
-  for (auto _ : state) benchmark::DoNotOptimize(buildAdjacency(f.mesh.facetVertices, f.mesh.vertices.size(), table));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(buildAdjacency(f.mesh.facetVertices, f.mesh.vertices.size(), table));
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(f.soup.facetCount()));
 }
 BENCHMARK(BM_Adjacency)->Unit(benchmark::kMillisecond);
 
 void BM_FacetLayers(benchmark::State& state) {
   const Fixture& f = fixture();
-  for (auto _ : state) benchmark::DoNotOptimize(computeFacetLayers(f.soup.corners, f.planes).bucketFacets.data());
+  for (auto _ : state)
+    benchmark::DoNotOptimize(computeFacetLayers(f.soup.corners, f.planes).bucketFacets.data());
 }
 BENCHMARK(BM_FacetLayers)->Unit(benchmark::kMillisecond);
 
@@ -84,7 +88,7 @@ void BM_MarchMeshBuild(benchmark::State& state) {
   MarchMesh march;
   for (auto _ : state) {
     prepareMarchMesh(f.layers, f.soup.facetCount(), march);
-    fillMarchFacets(f.soup.corners, f.table, f.layers, 0, march.facets.size(), march);
+    fillMarchFacets(f.soup.corners, f.table, f.layers, f.planes, 0, march.facets.size(), march);
     benchmark::DoNotOptimize(march.facets.data());
   }
 }
@@ -102,8 +106,10 @@ void BM_MarchFileOrder(benchmark::State& state) {
   uint32_t mark = 0;
   for (auto _ : state) {
     for (uint32_t k = k0; k < k0 + 512; ++k) {
-      if (k == k0) active.start(f.layers, k0);
-      else active.advance(f.layers);
+      if (k == k0)
+        active.start(f.layers, k0);
+      else
+        active.advance(f.layers);
       marchLayer(f.soup.corners, f.table, active.facets(), f.planes[k], ++mark, scratch, out);
       segments += out.points.size();
     }
@@ -124,8 +130,10 @@ void BM_MarchRecords(benchmark::State& state) {
   uint32_t mark = 0;
   for (auto _ : state) {
     for (uint32_t k = k0; k < k0 + 512; ++k) {
-      if (k == k0) active.start(f.march, k0);
-      else active.advance(f.march);
+      if (k == k0)
+        active.start(f.march, k0);
+      else
+        active.advance(f.march);
       marchRecordsLayer(f.march.facets, active.records(), f.planes[k], ++mark, scratch, out);
       segments += out.points.size();
     }
@@ -133,6 +141,30 @@ void BM_MarchRecords(benchmark::State& state) {
   state.SetItemsProcessed(static_cast<int64_t>(segments));
 }
 BENCHMARK(BM_MarchRecords)->Unit(benchmark::kMillisecond);
+
+// The same 512 layers followed from layer to layer (slice_follow.h: the sr kernel on closed meshes).
+void BM_FollowLoops(benchmark::State& state) {
+  const Fixture& f = fixture();
+  LoopFollower follower;
+  ActiveRecords active;
+  LayerContours out;
+  const auto k0 = static_cast<uint32_t>(f.planes.size() / 2 - 256);
+  uint64_t segments = 0;
+  for (auto _ : state) {
+    for (uint32_t k = k0; k < k0 + 512; ++k) {
+      if (k == k0) {
+        active.start(f.march, k0);
+        follower.start(f.march, active.records(), k, f.planes[k], out);
+      } else if (!follower.advance(f.march, k, f.planes[k], out)) {
+        state.SkipWithError("inconsistent table");
+        return;
+      }
+      segments += out.points.size();
+    }
+  }
+  state.SetItemsProcessed(static_cast<int64_t>(segments));
+}
+BENCHMARK(BM_FollowLoops)->Unit(benchmark::kMillisecond);
 
 // One mid-height layer joined by the closest-point rule (O(s^2)).
 void BM_ClosestPointLayer(benchmark::State& state) {

@@ -1,5 +1,7 @@
 #include "core/march_mesh.h"
 
+#include <algorithm>
+
 namespace toposlice {
 
 void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh) {
@@ -30,8 +32,11 @@ void ActiveRecords::advance(const MarchMesh& mesh) {
   active_.swap(next_);
 }
 
-void fillMarchFacets(std::span<const Point3f> corners, std::span<const int32_t> adjacency, const FacetLayers& layers,
-                     std::size_t begin, std::size_t end, MarchMesh& mesh) {
+std::size_t fillMarchFacets(std::span<const Point3f> corners, std::span<const int32_t> adjacency,
+                            const FacetLayers& layers, std::span<const double> planes, std::size_t begin,
+                            std::size_t end, MarchMesh& mesh) {
+  const PlaneLocator locate(planes);
+  std::size_t missing = 0;
   for (std::size_t p = begin; p < end; ++p) {
     const uint32_t f = layers.bucketFacets[p];
     MarchFacet& r = mesh.facets[p];
@@ -39,11 +44,16 @@ void fillMarchFacets(std::span<const Point3f> corners, std::span<const int32_t> 
       r.corner[j] = corners[3 * std::size_t{f} + j];
       const int32_t n = adjacency[3 * std::size_t{f} + j];
       r.next[j] = n < 0 ? -1 : mesh.position[static_cast<std::size_t>(n)];
+      missing += n < 0 ? 1 : 0;
     }
     r.id = f;
     r.first = layers.first[f];
     r.last = layers.last[f];
+    const float a = r.corner[0].z, b = r.corner[1].z, c = r.corner[2].z;
+    const float middle = std::max(std::min(a, b), std::min(std::max(a, b), c));
+    r.mid = std::clamp(locate.countAtOrBelow(middle), r.first, r.last + 1);
   }
+  return missing;
 }
 
 }  // namespace toposlice

@@ -19,17 +19,23 @@ namespace toposlice {
 
 struct alignas(64) MarchFacet {
   Point3f corner[3];
-  int32_t next[3];  // record position across edge j, or -1
-  uint32_t id;      // the facet's index in the model
+  int32_t next[3];       // record position across edge j, or -1
+  uint32_t id;           // the facet's index in the model
   uint32_t first, last;  // layer range it crosses
+  // First layer (clamped to first..last + 1) above its middle corner: before it, one corner lies below
+  // the plane; from it on, two. The facet's crossed edges -- its place in a loop -- change only there.
+  uint32_t mid;
 };
 static_assert(sizeof(MarchFacet) == 64);
 
 struct MarchMesh {
-  std::vector<MarchFacet> facets;       // crossing facets in first-layer order
-  std::vector<uint32_t> layerStart;     // per layer + 1: records whose first layer is k start at layerStart[k]
-  std::vector<int32_t> position;        // per model facet: its record, or -1 when it crosses no plane
-  std::vector<uint32_t> last;           // per record: last layer (compact copy for band start scans)
+  std::vector<MarchFacet> facets;    // crossing facets in first-layer order
+  std::vector<uint32_t> layerStart;  // per layer + 1: records whose first layer is k start at layerStart[k]
+  std::vector<int32_t> position;     // per model facet: its record, or -1 when it crosses no plane
+  std::vector<uint32_t> last;        // per record: last layer (compact copy for band start scans)
+  // Crossing records with an edge that has no neighbour (boundary, non-manifold or inconsistent): then
+  // walks may end open, and only the layer-by-layer march (slice_march.h) handles them.
+  std::size_t missingNeighbours = 0;
 };
 
 // The records crossing the current layer, maintained layer by layer like ActiveFacets (in record order,
@@ -54,8 +60,11 @@ class ActiveRecords {
 // Sizes the mesh and fills `position` and `layerStart` from the buckets (serial, linear).
 void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh);
 
-// Fills records [begin, end) (callers may split the range across threads). Needs prepareMarchMesh first.
-void fillMarchFacets(std::span<const Point3f> corners, std::span<const int32_t> adjacency, const FacetLayers& layers,
-                     std::size_t begin, std::size_t end, MarchMesh& mesh);
+// Fills records [begin, end) (callers may split the range across threads) and returns how many of their
+// edges have no neighbour (add them up into mesh.missingNeighbours). Needs prepareMarchMesh first;
+// `planes` are the ones `layers` was computed for.
+std::size_t fillMarchFacets(std::span<const Point3f> corners, std::span<const int32_t> adjacency,
+                            const FacetLayers& layers, std::span<const double> planes, std::size_t begin,
+                            std::size_t end, MarchMesh& mesh);
 
 }  // namespace toposlice

@@ -8,6 +8,7 @@
 #include "core/layer_ranges.h"
 #include "core/march_mesh.h"
 #include "core/slice_closest.h"
+#include "core/slice_follow.h"
 #include "core/slice_march.h"
 #include "parallel/embree_queries.h"
 #include "parallel/parallel.h"
@@ -15,25 +16,35 @@
 namespace toposlice {
 
 bool parseCandidateSearch(const std::string& name, CandidateSearch& search) {
-  if (name == "sweep") search = CandidateSearch::Sweep;
-  else if (name == "embree") search = CandidateSearch::Embree;
-  else return false;
+  if (name == "sweep")
+    search = CandidateSearch::Sweep;
+  else if (name == "embree")
+    search = CandidateSearch::Embree;
+  else
+    return false;
   return true;
 }
 
 bool parseSliceMethod(const std::string& name, SliceMethod& method) {
-  if (name == "cp") method = SliceMethod::ClosestPoint;
-  else if (name == "sr-lazy") method = SliceMethod::SelfReuseLazy;
-  else if (name == "sr") method = SliceMethod::SelfReuse;
-  else return false;
+  if (name == "cp")
+    method = SliceMethod::ClosestPoint;
+  else if (name == "sr-lazy")
+    method = SliceMethod::SelfReuseLazy;
+  else if (name == "sr")
+    method = SliceMethod::SelfReuse;
+  else
+    return false;
   return true;
 }
 
 const char* sliceMethodName(SliceMethod method) {
   switch (method) {
-    case SliceMethod::ClosestPoint: return "cp";
-    case SliceMethod::SelfReuseLazy: return "sr-lazy";
-    case SliceMethod::SelfReuse: return "sr";
+    case SliceMethod::ClosestPoint:
+      return "cp";
+    case SliceMethod::SelfReuseLazy:
+      return "sr-lazy";
+    case SliceMethod::SelfReuse:
+      return "sr";
   }
   return "?";
 }
@@ -75,13 +86,30 @@ struct SlotMesh {
   ActiveFacets active;
   ActiveRecords records;
   MarchScratch march;
+  LoopFollower follow;
   ClosestScratch closest;
   GapScratch gaps;
 };
 
 // Slices layer k of one mesh into `out` (cp or sr; the band's first layer starts the sweep).
-uint32_t sliceBandLayer(const SliceMesh& mesh, const MeshState& state, SliceMethod method, uint32_t k, bool first,
-                        double z, double tolerance2, SlotMesh& slot, LayerContours& out) {
+uint32_t sliceBandLayer(const SliceMesh& mesh, const MeshState& state, SliceMethod method, uint32_t k,
+                        bool first, double z, double tolerance2, SlotMesh& slot, LayerContours& out) {
+  if (method == SliceMethod::SelfReuse && state.march.missingNeighbours == 0) {
+    if (!first && slot.follow.advance(state.march, k, z, out)) return 0;
+    std::span<const uint32_t> active;
+    if (state.bvh) {
+      startRecordsFromBvh(*state.bvh, state.march, z, k, slot.candidates);
+      active = slot.candidates;
+    } else {
+      slot.records.start(state.march, k);
+      active = slot.records.records();
+    }
+    if (slot.follow.start(state.march, active, k, z, out)) return 0;
+    // Only an inconsistent table gets here (a walk that does not close): march this layer instead.
+    slot.march.prepare(state.march.facets.size());
+    slot.march.forgetWalk();
+    return marchRecordsLayer(state.march.facets, active, z, k + 1, slot.march, out);
+  }
   if (method == SliceMethod::SelfReuse) {
     if (first) {
       slot.march.prepare(state.march.facets.size());
@@ -99,8 +127,9 @@ uint32_t sliceBandLayer(const SliceMesh& mesh, const MeshState& state, SliceMeth
   }
   if (first && state.bvh) {
     state.bvh->facetsCrossingPlane(z, slot.candidates);
-    std::erase_if(slot.candidates, [&](uint32_t f) { return state.layers.first[f] > state.layers.last[f] ||
-                                                            state.layers.last[f] == UINT32_MAX; });
+    std::erase_if(slot.candidates, [&](uint32_t f) {
+      return state.layers.first[f] > state.layers.last[f] || state.layers.last[f] == UINT32_MAX;
+    });
     slot.active.startFrom(slot.candidates, k);
   } else if (first) {
     slot.active.start(state.layers, k);
@@ -110,8 +139,9 @@ uint32_t sliceBandLayer(const SliceMesh& mesh, const MeshState& state, SliceMeth
   return closestPointLayer(mesh.corners, slot.active.facets(), z, tolerance2, slot.closest, out);
 }
 
-SliceStats sliceLazy(std::span<const SliceMesh> meshes, std::vector<MeshState>& states, std::span<const double> planes,
-                     const SliceSettings& settings, const LayerStages& stages, const ProgressContext* progress) {
+SliceStats sliceLazy(std::span<const SliceMesh> meshes, std::vector<MeshState>& states,
+                     std::span<const double> planes, const SliceSettings& settings, const LayerStages& stages,
+                     const ProgressContext* progress) {
   SliceStats stats;
   std::vector<LazySlicer> slicers;
   std::vector<ActiveFacets> active(meshes.size());
@@ -127,8 +157,10 @@ SliceStats sliceLazy(std::span<const SliceMesh> meshes, std::vector<MeshState>& 
   const bool repairs = settings.closeGaps > 0 || settings.closeRemaining;
   for (uint32_t k = 0; k < count; ++k) {
     for (std::size_t i = 0; i < meshes.size(); ++i) {
-      if (k == 0) active[i].start(states[i].layers, 0);
-      else active[i].advance(states[i].layers);
+      if (k == 0)
+        active[i].start(states[i].layers, 0);
+      else
+        active[i].advance(states[i].layers);
       GapStats gaps;
       if (slicers[i].sliceLayer(active[i].facets(), planes[k], k, out[i]) > 0 && repairs)
         gaps = closeGaps(out[i], settings.closeGaps, settings.closeRemaining, gapScratch[i]);
@@ -160,10 +192,12 @@ BandPlan planBands(std::size_t layerCount, const SliceSettings& settings) {
   return {band, std::min<std::size_t>(bands, 2 * threads)};
 }
 
-SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double> planes, const SliceSettings& settings,
-                       const LayerStages& stages, const ProgressContext* progress) {
+SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double> planes,
+                       const SliceSettings& settings, const LayerStages& stages,
+                       const ProgressContext* progress) {
   std::vector<MeshState> states(meshes.size());
-  for (std::size_t i = 0; i < meshes.size(); ++i) states[i].layers = facetLayersParallel(meshes[i].corners, planes);
+  for (std::size_t i = 0; i < meshes.size(); ++i)
+    states[i].layers = facetLayersParallel(meshes[i].corners, planes);
   if (settings.method == SliceMethod::SelfReuseLazy)
     return sliceLazy(meshes, states, planes, settings, stages, progress);
 
@@ -174,9 +208,12 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
     for (std::size_t i = 0; i < meshes.size(); ++i) {
       MeshState& state = states[i];
       prepareMarchMesh(state.layers, meshes[i].corners.size() / 3, state.march);
+      std::atomic<std::size_t> missing{0};
       parallelForChunks(state.march.facets.size(), 16384, [&](std::size_t begin, std::size_t end) {
-        fillMarchFacets(meshes[i].corners, meshes[i].adjacency, state.layers, begin, end, state.march);
+        missing += fillMarchFacets(meshes[i].corners, meshes[i].adjacency, state.layers, planes, begin, end,
+                                   state.march);
       });
+      state.march.missingNeighbours = missing.load();
     }
   }
 
@@ -213,13 +250,15 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
             const uint32_t open = sliceBandLayer(meshes[i], states[i], settings.method, k, k == k0, planes[k],
                                                  tolerance2, slot.mesh[i], out);
             if (open > 0 && repairs) {
-              const GapStats gaps = closeGaps(out, settings.closeGaps, settings.closeRemaining, slot.mesh[i].gaps);
+              const GapStats gaps =
+                  closeGaps(out, settings.closeGaps, settings.closeRemaining, slot.mesh[i].gaps);
               if (i == 0) slot.gaps[position] = gaps;
             }
           }
           if (stages.process)
-            stages.process(k, std::span<const LayerContours>(slot.out).subspan(position * meshCount, meshCount), s,
-                           position);
+            stages.process(k,
+                           std::span<const LayerContours>(slot.out).subspan(position * meshCount, meshCount),
+                           s, position);
         }
       },
       [&](std::size_t b, std::size_t s) {
@@ -229,7 +268,8 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
         const uint32_t k1 = std::min(layerCount, k0 + band);
         for (uint32_t k = k0; k < k1; ++k) {
           const uint32_t position = k - k0;
-          const auto layer = std::span<const LayerContours>(slot.out).subspan(position * meshCount, meshCount);
+          const auto layer =
+              std::span<const LayerContours>(slot.out).subspan(position * meshCount, meshCount);
           if (stages.consume) stages.consume(k, layer, s, position);
           countLayer(layer[0], stats);
           stats.gaps += slot.gaps[position];
@@ -243,8 +283,9 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
   return stats;
 }
 
-SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency, std::span<const double> planes,
-                      const SliceSettings& settings, const LayerConsumer& consume, const ProgressContext* progress) {
+SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency,
+                      std::span<const double> planes, const SliceSettings& settings,
+                      const LayerConsumer& consume, const ProgressContext* progress) {
   const SliceMesh mesh{corners, adjacency};
   LayerStages stages;
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t, uint32_t) {

@@ -10,17 +10,17 @@
 #include <memory>
 
 #include "core/crossing.h"
-#include "core/mesh_info.h"
-#include "core/variant_check.h"
-#include "core/weld.h"
 #include "core/mask_runs.h"
+#include "core/mesh_info.h"
 #include "core/printer.h"
 #include "core/rasterize.h"
+#include "core/variant_check.h"
+#include "core/weld.h"
 #include "io/cli_writer.h"
+#include "io/errors.h"
 #include "io/layer_report.h"
 #include "io/mask_png.h"
 #include "io/mask_sink.h"
-#include "io/errors.h"
 #include "io/stl_reader.h"
 #include "io/svg_writer.h"
 #include "io/threemf_writer.h"
@@ -38,8 +38,9 @@ std::string lowerExtension(const std::filesystem::path& path) {
   return ext;
 }
 
-std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options, const ContourJob& job,
-                                                           const FacetSoup& mesh, double layerHeight) {
+std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options,
+                                                           const ContourJob& job, const FacetSoup& mesh,
+                                                           double layerHeight) {
   std::vector<std::unique_ptr<ContourSink>> sinks;
   for (const auto& path : options.outputs) {
     const std::string ext = lowerExtension(path);
@@ -54,12 +55,12 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
     } else if (ext == ".3mf") {
       sinks.push_back(makeThreeMfWriter(path, job, &mesh, options.overwrite, layerHeight));
     } else {
-      throw InputError(path.string() + ": unknown contour output type '" + ext + "' (use .cli, .svg or .3mf)");
+      throw InputError(path.string() + ": unknown contour output type '" + ext +
+                       "' (use .cli, .svg or .3mf)");
     }
   }
   return sinks;
 }
-
 
 void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats = nullptr) {
   const IndexedMesh mesh = weldCorners(soup.corners);
@@ -92,7 +93,8 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
     return built;
   }
   if (result.topology.empty())
-    result.topology = method == SliceMethod::ClosestPoint ? "none (closest point)" : "discovered while slicing";
+    result.topology =
+        method == SliceMethod::ClosestPoint ? "none (closest point)" : "discovered while slicing";
   return {};
 }
 
@@ -180,10 +182,12 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   result.volume = signedVolume(soup.corners);
   result.inverted = result.volume < 0;
   if (result.inverted && options.fixOrientation) {
-    for (std::size_t c = 0; c < soup.corners.size(); c += 3) std::swap(soup.corners[c + 1], soup.corners[c + 2]);
+    for (std::size_t c = 0; c < soup.corners.size(); c += 3)
+      std::swap(soup.corners[c + 1], soup.corners[c + 2]);
     result.flipped = true;
   }
-  for (std::size_t c = 0; c < soup.corners.size(); c += 3) result.degenerateFacets += isDegenerateFacet(&soup.corners[c]);
+  for (std::size_t c = 0; c < soup.corners.size(); c += 3)
+    result.degenerateFacets += isDegenerateFacet(&soup.corners[c]);
 
   start = std::chrono::steady_clock::now();
   const SliceMethod method = options.slice.method;
@@ -196,7 +200,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   result.topologySeconds = secondsSince(start);
 
   std::string error;
-  const std::vector<double> planes = makePlanes(options.planes, result.bounds.min.z, result.bounds.max.z, error);
+  const std::vector<double> planes =
+      makePlanes(options.planes, result.bounds.min.z, result.bounds.max.z, error);
   if (!error.empty()) throw InputError(model.string() + ": " + error);
 
   ContourJob job;
@@ -205,7 +210,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   job.bounds = result.bounds;
   job.layerCount = static_cast<uint32_t>(planes.size());
   const bool uniform = options.planes.explicitZ.empty();
-  auto sinks = openContourSinks(options, job, soup, uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
+  auto sinks =
+      openContourSinks(options, job, soup, uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
 
   // Masks: grid, sink, and per-slot rasterizer state.
   const bool masks = !options.masks.output.empty();
@@ -257,15 +263,21 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
     r.islands = 0;
-    for (std::size_t l = 0; l < layer[0].loopCount(); ++l)
-      r.islands += layer[0].loopClosed[l] && signedArea(layer[0].loopPoints(l)) > 0 ? 1 : 0;
+    double modelArea = 0;
+    for (std::size_t l = 0; l < layer[0].loopCount(); ++l) {
+      const double area = signedArea(layer[0].loopPoints(l));
+      r.islands += layer[0].loopClosed[l] && area > 0 ? 1 : 0;
+      modelArea += area;
+    }
     if (!masks) {
-      r.area = layerSignedArea(layer[0]);
-      for (std::size_t i = 1; i < layer.size(); ++i) r.area += (i <= addCount ? 1 : -1) * layerSignedArea(layer[i]);
+      r.area = modelArea;  // layerSignedArea(layer[0]), without a second pass
+      for (std::size_t i = 1; i < layer.size(); ++i)
+        r.area += (i <= addCount ? 1 : -1) * layerSignedArea(layer[i]);
       return;
     }
     s.sets.clear();
-    for (std::size_t i = 0; i < layer.size(); ++i) s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
+    for (std::size_t i = 0; i < layer.size(); ++i)
+      s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
     if (maskJob.antiAliased) {
       rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
       r.area = maskArea(s.mask, maskJob.grid.pixel);
@@ -281,7 +293,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       encodeMaskRuns(s.mask, r.payload);
     }
   };
-  stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot, uint32_t position) {
+  stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
+                       uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
     for (auto& sink : sinks) sink->writeLayer(k, layer[0]);
     if (maskSink) {
