@@ -1,6 +1,7 @@
 #include "io/stl_reader.h"
 
 #include <fcntl.h>
+#include <libdeflate.h>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <zlib.h>
@@ -97,6 +98,14 @@ bool isGzip(std::span<const std::byte> bytes) {
   return bytes.size() >= 2 && bytes[0] == std::byte{0x1F} && bytes[1] == std::byte{0x8B};
 }
 
+// The last member's ISIZE trailer (the uncompressed size mod 2^32), capped by deflate's maximum ratio so
+// that a forged trailer cannot force a huge allocation. A hint only.
+std::size_t gzipSizeHint(std::span<const std::byte> in) {
+  if (in.size() < 18) return 0;
+  const std::size_t maxBytes = in.size() <= SIZE_MAX / 1100 ? in.size() * 1100 : SIZE_MAX / 2;
+  return std::min<std::size_t>(loadLe32(in.data() + in.size() - 4), maxBytes);
+}
+
 // Inflates one or more concatenated gzip members, on demand, into caller-owned memory.
 class GzipReader {
  public:
@@ -107,13 +116,7 @@ class GzipReader {
   GzipReader(const GzipReader&) = delete;
   GzipReader& operator=(const GzipReader&) = delete;
 
-  // The last member's ISIZE trailer (the uncompressed size mod 2^32), capped by deflate's maximum
-  // ratio so that a forged trailer cannot force a huge allocation. A hint only.
-  std::size_t sizeHint() const {
-    if (in_.size() < 18) return 0;
-    const std::size_t maxBytes = in_.size() <= SIZE_MAX / 1100 ? in_.size() * 1100 : SIZE_MAX / 2;
-    return std::min<std::size_t>(loadLe32(in_.data() + in_.size() - 4), maxBytes);
-  }
+  std::size_t sizeHint() const { return gzipSizeHint(in_); }
 
   // Fills out[0, size); returns fewer bytes only at the end of the stream.
   std::size_t read(std::byte* out, std::size_t size) {
@@ -172,6 +175,25 @@ class GzipReader {
   std::size_t fed_ = 0;  // bytes of in_ handed to zlib so far
   bool finished_ = false;
 };
+
+// The whole stream in one call of libdeflate (about twice zlib's speed), for the common case of one
+// gzip member whose trailer gives the exact size. Returns false for anything else -- several members, a
+// size over 4 GiB, any damage -- and the caller then reads it with GzipReader, which names the problem.
+bool inflateWhole(std::span<const std::byte> in, std::size_t sizeHint, ByteBuffer& out) {
+  if (sizeHint == 0) return false;
+  struct Freer {
+    void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
+  };
+  const std::unique_ptr<libdeflate_decompressor, Freer> decompressor(libdeflate_alloc_decompressor());
+  if (!decompressor) return false;
+  out.reserveExactly(sizeHint + 1);
+  std::size_t inUsed = 0, outSize = 0;
+  const libdeflate_result rc = libdeflate_gzip_decompress_ex(decompressor.get(), in.data(), in.size(),
+                                                             out.data.get(), sizeHint, &inUsed, &outSize);
+  if (rc != LIBDEFLATE_SUCCESS || inUsed != in.size() || outSize != sizeHint) return false;
+  out.size = outSize;
+  return true;
+}
 
 // ---------------------------------------------------------------------------------------------------
 // Binary STL.
@@ -534,6 +556,8 @@ FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, St
   out = StlSource{};
   if (isGzip(bytes)) {
     out.gzip = true;
+    ByteBuffer whole;
+    if (inflateWhole(bytes, gzipSizeHint(bytes), whole)) return parseUncompressed(whole.view(), name, out);
     FacetSoup soup;
     if (streamGzipBinary(bytes, name, out, soup)) return soup;
     const ByteBuffer inflated = GzipReader(bytes, name).readAll();
