@@ -2,17 +2,22 @@
 // single-threaded; `--benchmark_filter` picks kernels. Model: TOPOSLICE_BENCH_MODEL or the derived aligner.
 #include <benchmark/benchmark.h>
 
+#include <array>
 #include <cstdlib>
+#include <optional>
 
 #include "core/adjacency.h"
 #include "core/layer_ranges.h"
 #include "core/march_mesh.h"
 #include "core/mesh_info.h"
 #include "core/planes.h"
+#include "core/printer.h"
+#include "core/rasterize.h"
 #include "core/slice_closest.h"
 #include "core/slice_follow.h"
 #include "core/slice_march.h"
 #include "core/weld.h"
+#include "io/mask_png.h"
 #include "io/stl_reader.h"
 #include "tests/fixtures/models.h"
 
@@ -178,6 +183,52 @@ void BM_ClosestPointLayer(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(active.facets().size()));
 }
 BENCHMARK(BM_ClosestPointLayer)->Unit(benchmark::kMillisecond);
+
+// Layers of the aligner on the Prusa SL1 grid (2560 x 1440, 0.04725 mm, centred), binary and
+// anti-aliased, at 25, 50 and 75 % of the model's height: what every core encodes once per layer.
+struct MaskFixture {
+  std::array<std::array<MaskImage, 2>, 3> masks;  // [height 25/50/75 %][binary, anti-aliased]
+
+  MaskFixture() {
+    const Fixture& f = fixture();
+    const PixelGrid grid =
+        placeGrid(boundsOf(f.soup.corners), 2560, 1440, 0.04725, std::nullopt, false, false);
+    MarchScratch scratch;
+    scratch.prepare(f.march.facets.size());
+    RasterScratch raster;
+    LayerContours layer;
+    for (uint32_t h = 0; h < 3; ++h) {
+      const auto k = static_cast<uint32_t>(f.planes.size() * (h + 1) / 4);
+      ActiveRecords active;
+      active.start(f.march, k);
+      marchRecordsLayer(f.march.facets, active.records(), f.planes[k], 1, scratch, layer);
+      const ContourSet set{&layer, 1};
+      rasterizeBinary({&set, 1}, grid, masks[h][0], raster);
+      rasterizeCoverage({&set, 1}, grid, masks[h][1], raster);
+    }
+  }
+};
+
+const MaskFixture& maskFixture() {
+  static const MaskFixture f;
+  return f;
+}
+
+// encodeMaskPng of one layer; args: height (25, 50, 75 %), anti-aliased (0, 1), code (0 smallest: the
+// default, dynamic for these layers; 1 fixed). Counter: PNG bytes.
+void BM_EncodeMaskPng(benchmark::State& state) {
+  const MaskImage& mask = maskFixture().masks[state.range(0) / 25 - 1][state.range(1)];
+  const MaskPngCode code = state.range(2) == 0 ? MaskPngCode::smallest : MaskPngCode::fixed;
+  std::vector<uint8_t> png;
+  MaskPngScratch scratch;
+  for (auto _ : state) {
+    encodeMaskPng(mask, png, scratch, code);
+    benchmark::DoNotOptimize(png.data());
+  }
+  state.counters["bytes"] = static_cast<double>(png.size());
+  state.SetBytesProcessed(state.iterations() * static_cast<int64_t>(mask.pixels.size()));
+}
+BENCHMARK(BM_EncodeMaskPng)->ArgsProduct({{25, 50, 75}, {0, 1}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 }  // namespace toposlice

@@ -9,9 +9,13 @@ void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMe
   mesh.layerStart = layers.bucketOffsets;
   mesh.position.assign(facetCount, -1);
   mesh.last.resize(layers.bucketFacets.size());
+  mesh.blockLast.assign((layers.bucketFacets.size() + MarchMesh::kBlockRecords - 1) / MarchMesh::kBlockRecords, 0);
   for (std::size_t p = 0; p < layers.bucketFacets.size(); ++p) {
     mesh.position[layers.bucketFacets[p]] = static_cast<int32_t>(p);
-    mesh.last[p] = layers.last[layers.bucketFacets[p]];
+    const uint32_t last = layers.last[layers.bucketFacets[p]];
+    mesh.last[p] = last;
+    uint32_t& block = mesh.blockLast[p / MarchMesh::kBlockRecords];
+    block = std::max(block, last);
   }
 }
 
@@ -19,8 +23,12 @@ void ActiveRecords::start(const MarchMesh& mesh, uint32_t layer) {
   layer_ = layer;
   active_.clear();
   const uint32_t end = mesh.layerStart[layer + 1];  // records whose first layer is <= layer
-  for (uint32_t p = 0; p < end; ++p)
-    if (mesh.last[p] >= layer) active_.push_back(p);
+  for (uint32_t block = 0; block * MarchMesh::kBlockRecords < end; ++block) {
+    if (mesh.blockLast[block] < layer) continue;  // every record of the block ended below this layer
+    const uint32_t blockEnd = std::min(end, (block + 1) * MarchMesh::kBlockRecords);
+    for (uint32_t p = block * MarchMesh::kBlockRecords; p < blockEnd; ++p)
+      if (mesh.last[p] >= layer) active_.push_back(p);
+  }
 }
 
 void ActiveRecords::advance(const MarchMesh& mesh) {

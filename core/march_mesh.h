@@ -33,6 +33,9 @@ struct MarchMesh {
   std::vector<uint32_t> layerStart;  // per layer + 1: records whose first layer is k start at layerStart[k]
   std::vector<int32_t> position;     // per model facet: its record, or -1 when it crosses no plane
   std::vector<uint32_t> last;        // per record: last layer (compact copy for band start scans)
+  // Per block of kBlockRecords records: the largest `last`, so a band start skips blocks that ended.
+  static constexpr uint32_t kBlockRecords = 256;
+  std::vector<uint32_t> blockLast;
   // Crossing records with an edge that has no neighbour (boundary, non-manifold or inconsistent): then
   // walks may end open, and only the layer-by-layer march (slice_march.h) handles them.
   std::size_t missingNeighbours = 0;

@@ -187,7 +187,7 @@ class Sl1Sink final : public MaskSink {
         throw OutputError(file_.finalPath().string() + ": layer " + std::to_string(index) +
                           " does not match the job's image size");
       }
-      encodeMaskPng(mask, scratch_);
+      encodeMaskPng(mask, scratch_, pngScratch_);
       png = scratch_;
     }
     addEntry(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), png);
@@ -239,6 +239,7 @@ class Sl1Sink final : public MaskSink {
   zipFile zip_ = nullptr;
   zip_fileinfo info_{};
   std::vector<uint8_t> scratch_;
+  MaskPngScratch pngScratch_;
   uint32_t next_ = 0;
 };
 

@@ -4,12 +4,14 @@
 #include <spng.h>
 #include <unistd.h>
 #include <zip.h>  // libzip, to read archives back independently of the writer's minizip
+#include <zlib.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -267,6 +269,370 @@ TEST(PngEncode, Speed2560x1440Binary) {
   RecordProperty("png_bytes", std::to_string(png.size()));
   std::printf("[ info     ] 2560x1440 binary mask: %.3f ms, %zu bytes\n", best, png.size());
   EXPECT_LT(best, 50.0);  // about 0.5 ms optimised; loose for sanitizer and debug builds
+}
+
+// ---------------------------------------------------------------------------------------------------
+// PNG, checked byte by byte with zlib's inflate (an implementation independent of the encoder's).
+
+// Tight lit extents of every row, as the binary rasterizer keeps them (mask_image.h).
+MaskImage withExtents(MaskImage m) {
+  m.litBegin.assign(m.height, m.width);
+  m.litEnd.assign(m.height, 0);
+  for (uint32_t r = 0; r < m.height; ++r) {
+    for (uint32_t i = 0; i < m.width; ++i) {
+      if (m.pixels[size_t{r} * m.width + i] != 0) {
+        m.litBegin[r] = std::min(m.litBegin[r], i);
+        m.litEnd[r] = i + 1;
+      }
+    }
+  }
+  return m;
+}
+
+uint32_t bigEndian32(const uint8_t* p) {
+  return (uint32_t{p[0]} << 24) | (uint32_t{p[1]} << 16) | (uint32_t{p[2]} << 8) | p[3];
+}
+
+// What a PNG of encodeMaskPng holds, read without libspng: the zlib stream of its one IDAT, inflated.
+struct InflatedPng {
+  uint32_t width = 0, height = 0;
+  std::vector<uint8_t> zlibStream;  // the IDAT data
+  std::vector<uint8_t> filtered;    // inflated: per row a filter byte, then the pixels
+  int blockType = -1;               // BTYPE of the first deflate block: 1 fixed, 2 dynamic
+  bool onlyBlock = false;           // BFINAL of the first block
+};
+
+// Checks the signature, the chunk sequence IHDR IDAT IEND and every chunk CRC, then inflates the IDAT
+// with zlib (which checks the Adler-32). Failures are reported; returns false after one.
+bool inflatePng(const std::vector<uint8_t>& png, InflatedPng& result) {
+  static constexpr uint8_t kSignature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
+  if (png.size() < 8 || std::memcmp(png.data(), kSignature, 8) != 0) {
+    ADD_FAILURE() << "no PNG signature";
+    return false;
+  }
+  std::vector<std::string> types;
+  for (size_t at = 8; at < png.size();) {
+    if (png.size() - at < 12) {
+      ADD_FAILURE() << "truncated chunk at " << at;
+      return false;
+    }
+    const uint32_t length = bigEndian32(&png[at]);
+    if (png.size() - at - 12 < length) {
+      ADD_FAILURE() << "chunk length past the end at " << at;
+      return false;
+    }
+    const std::string type(reinterpret_cast<const char*>(&png[at + 4]), 4);
+    const uint8_t* data = &png[at + 8];
+    if (crc32_z(0, &png[at + 4], 4 + length) != bigEndian32(data + length)) {
+      ADD_FAILURE() << type << ": bad CRC";
+      return false;
+    }
+    if (type == "IHDR") {
+      result.width = bigEndian32(data);
+      result.height = bigEndian32(data + 4);
+      if (length != 13 || data[8] != 8 || data[9] != 0 || data[10] != 0 || data[11] != 0 || data[12] != 0) {
+        ADD_FAILURE() << "IHDR is not 8-bit grayscale, deflate, filter method 0, no interlace";
+        return false;
+      }
+    }
+    if (type == "IDAT") result.zlibStream.assign(data, data + length);
+    types.push_back(type);
+    at += 12 + length;
+  }
+  if (types != std::vector<std::string>{"IHDR", "IDAT", "IEND"}) {
+    ADD_FAILURE() << "chunks are not IHDR IDAT IEND";
+    return false;
+  }
+  if (result.zlibStream.size() < 3) {
+    ADD_FAILURE() << "IDAT too short";
+    return false;
+  }
+  result.blockType = (result.zlibStream[2] >> 1) & 3;
+  result.onlyBlock = (result.zlibStream[2] & 1) != 0;
+  const size_t rawSize = (size_t{result.width} + 1) * result.height;
+  result.filtered.assign(rawSize + 1, 0xEE);  // one spare byte: inflating more than rawSize is an error
+  z_stream z{};
+  if (inflateInit(&z) != Z_OK) {
+    ADD_FAILURE() << "inflateInit";
+    return false;
+  }
+  z.next_in = result.zlibStream.data();
+  z.avail_in = static_cast<uInt>(result.zlibStream.size());
+  z.next_out = result.filtered.data();
+  z.avail_out = static_cast<uInt>(result.filtered.size());
+  const int rc = inflate(&z, Z_FINISH);
+  const size_t produced = result.filtered.size() - z.avail_out, leftIn = z.avail_in;
+  const std::string message = z.msg ? z.msg : "";
+  inflateEnd(&z);
+  if (rc != Z_STREAM_END || produced != rawSize || leftIn != 0) {
+    ADD_FAILURE() << "inflate: rc " << rc << " (" << message << "), " << produced << " of " << rawSize
+                  << " bytes, " << leftIn << " input bytes left";
+    return false;
+  }
+  result.filtered.resize(rawSize);
+  return true;
+}
+
+// Encodes with the given code, inflates with zlib and compares every byte (filter type 0, the pixels,
+// rows top-down). Returns the PNG's first block type (-1 on failure).
+int expectInflatesExactly(const MaskImage& mask, MaskPngCode code = MaskPngCode::smallest,
+                          std::vector<uint8_t>* pngOut = nullptr) {
+  std::vector<uint8_t> png;
+  MaskPngScratch scratch;
+  encodeMaskPng(mask, png, scratch, code);
+  if (pngOut) *pngOut = png;
+  InflatedPng in;
+  if (!inflatePng(png, in)) return -1;
+  EXPECT_EQ(in.width, mask.width);
+  EXPECT_EQ(in.height, mask.height);
+  EXPECT_TRUE(in.onlyBlock);
+  for (uint32_t r = 0; r < mask.height; ++r) {
+    const uint8_t* row = &in.filtered[size_t{r} * (mask.width + 1)];
+    const uint8_t* expected = &mask.pixels[size_t{mask.height - 1 - r} * mask.width];
+    if (row[0] != 0 || std::memcmp(row + 1, expected, mask.width) != 0) {
+      ADD_FAILURE() << mask.width << "x" << mask.height << ": PNG row " << r << " differs";
+      return -1;
+    }
+  }
+  return in.blockType;
+}
+
+// The literal/length and distance code lengths of a dynamic block (RFC 1951 3.2.7), read back bit by bit.
+struct DynamicHeader {
+  std::vector<uint8_t> litLen, distance;
+};
+
+bool readDynamicHeader(const std::vector<uint8_t>& zlibStream, DynamicHeader& header) {
+  size_t bit = 16;  // after CMF and FLG
+  auto bits = [&](uint32_t n) {
+    uint32_t v = 0;
+    for (uint32_t i = 0; i < n; ++i, ++bit) v |= ((zlibStream[bit / 8] >> (bit % 8)) & 1u) << i;
+    return v;
+  };
+  if (bits(3) != 0b101) return false;  // BFINAL, BTYPE = 10
+  const uint32_t hlit = bits(5) + 257, hdist = bits(5) + 1, hclen = bits(4) + 4;
+  static constexpr uint8_t kOrder[19] = {16, 17, 18, 0, 8, 7, 9, 6, 10, 5, 11, 4, 12, 3, 13, 2, 14, 1, 15};
+  uint8_t codeLength[19] = {};
+  for (uint32_t i = 0; i < hclen; ++i) codeLength[kOrder[i]] = static_cast<uint8_t>(bits(3));
+  // Decode with the canonical code: try lengths 1..7, matching the MSB-first code read so far.
+  auto symbol = [&]() -> int {
+    uint32_t code = 0, first = 0, index = 0;
+    for (uint32_t len = 1; len <= 7; ++len) {
+      code |= bits(1);
+      uint32_t count = 0;
+      for (uint8_t l : codeLength) count += l == len;
+      if (code - first < count) {
+        uint32_t k = code - first;
+        for (int s = 0; s < 19; ++s) {
+          if (codeLength[s] == len && k-- == 0) return s;
+        }
+      }
+      index += count;
+      first = (first + count) << 1;
+      code <<= 1;
+    }
+    return -1;
+  };
+  std::vector<uint8_t> lengths;
+  while (lengths.size() < hlit + hdist) {
+    const int s = symbol();
+    if (s < 0) return false;
+    if (s < 16) {
+      lengths.push_back(static_cast<uint8_t>(s));
+    } else if (s == 16) {
+      if (lengths.empty()) return false;
+      lengths.insert(lengths.end(), 3 + bits(2), lengths.back());
+    } else {
+      lengths.insert(lengths.end(), s == 17 ? 3 + bits(3) : 11 + bits(7), 0);
+    }
+  }
+  if (lengths.size() != hlit + hdist) return false;
+  header.litLen.assign(lengths.begin(), lengths.begin() + hlit);
+  header.distance.assign(lengths.begin() + hlit, lengths.end());
+  return true;
+}
+
+// Kraft sum of a code in units of 2^-15 (32768: complete).
+uint32_t kraftSum(const std::vector<uint8_t>& lengths) {
+  uint32_t sum = 0;
+  for (uint8_t l : lengths) sum += l == 0 ? 0 : 1u << (15 - l);
+  return sum;
+}
+
+MaskImage filledMask(uint32_t width, uint32_t height, uint8_t value) {
+  MaskImage m = blankMask(width, height);
+  std::fill(m.pixels.begin(), m.pixels.end(), value);
+  return m;
+}
+
+TEST(PngEncode, ZlibInflatesEdgeCasesWithEitherCode) {
+  std::vector<MaskImage> masks;
+  for (const auto& [w, h] : std::vector<std::pair<uint32_t, uint32_t>>{
+           {1, 1}, {1, 2}, {2, 1}, {1, 300}, {3, 3}, {7, 5}, {257, 3}, {258, 2}, {259, 4}, {2560, 1440}}) {
+    masks.push_back(blankMask(w, h));        // all black: one literal, one distance
+    masks.push_back(filledMask(w, h, 255));  // all white
+    masks.push_back(filledMask(w, h, 7));    // a single grey level
+    MaskImage one = blankMask(w, h);         // a single lit pixel, in each corner
+    for (int corner = 0; corner < 4; ++corner) {
+      const uint32_t i = corner % 2 ? w - 1 : 0, j = corner / 2 ? h - 1 : 0;
+      MaskImage c = one;
+      c.pixels[size_t{j} * w + i] = 255;
+      masks.push_back(c);
+    }
+  }
+  // Lit spans touching both image borders, the right border only, the left border only.
+  MaskImage borders = blankMask(101, 40);
+  for (uint32_t j = 0; j < 40; ++j) {
+    const uint32_t from = j % 3 == 1 ? 50 : 0, to = j % 3 == 2 ? 60 : 101;
+    std::fill_n(borders.pixels.begin() + size_t{j} * 101 + from, to - from, 255);
+  }
+  masks.push_back(borders);
+  // Every grey value, many times, in several patterns (anti-aliased edges at their worst).
+  MaskImage ramp = blankMask(256, 64);
+  for (uint32_t j = 0; j < 64; ++j) {
+    for (uint32_t i = 0; i < 256; ++i)
+      ramp.pixels[size_t{j} * 256 + i] = static_cast<uint8_t>((i * (j + 1)) & 255);
+  }
+  masks.push_back(ramp);
+  masks.push_back(noiseMask(255, 77, 9, false));
+  masks.push_back(noiseMask(1, 999, 10, false));
+  masks.push_back(discMask(1001, 333, 500, 160, 150, true));
+  for (size_t k = 0; k < masks.size(); ++k) {
+    for (const MaskImage& m : {masks[k], withExtents(masks[k])}) {
+      for (const MaskPngCode code : {MaskPngCode::smallest, MaskPngCode::fixed}) {
+        const int type = expectInflatesExactly(m, code);
+        ASSERT_NE(type, -1) << "mask " << k << " (" << m.width << "x" << m.height << ")";
+        if (code == MaskPngCode::fixed) {
+          EXPECT_EQ(type, 1) << "mask " << k;
+        }
+      }
+    }
+  }
+}
+
+TEST(PngEncode, ZlibInflatesRandomRunImages) {
+  // Runs of every length around the 258-byte match limit, repeated lit and dark rows, few and many
+  // grey levels, with and without extents, under both codes.
+  std::mt19937 rng(4242);
+  const auto below = [&rng](uint32_t n) { return static_cast<uint32_t>(rng() % n); };
+  for (uint32_t trial = 0; trial < 300; ++trial) {
+    const uint32_t width = 1 + below(trial % 5 == 0 ? 3 : 900), height = 1 + below(60);
+    const uint32_t levels = trial % 3 == 0 ? 2 : 1 + below(256);
+    const uint32_t maxRun = 1 + below(trial % 2 ? 8 : 700);
+    MaskImage m = blankMask(width, height);
+    for (uint32_t j = 0; j < height; ++j) {
+      uint8_t* row = m.pixels.data() + size_t{j} * width;
+      if (j > 0 && below(3) == 0) {
+        std::copy_n(row - width, width, row);
+        continue;
+      }
+      if (below(4) == 0) continue;  // dark row
+      for (uint32_t i = 0; i < width;) {
+        const uint32_t run = std::min(width - i, 1 + below(maxRun));
+        const auto value = static_cast<uint8_t>(levels == 2 ? below(2) * 255 : below(levels));
+        std::fill_n(row + i, run, value);
+        i += run;
+      }
+    }
+    const MaskImage& mask = trial % 2 ? m : withExtents(m);
+    const MaskPngCode code = trial % 4 == 3 ? MaskPngCode::fixed : MaskPngCode::smallest;
+    ASSERT_NE(expectInflatesExactly(mask, code), -1) << "trial " << trial << ", " << width << "x" << height;
+  }
+}
+
+// Twelve discs, 41 % lit: a typical busy binary layer.
+MaskImage twelveDiscs(bool antiAliased) {
+  MaskImage m = blankMask(2560, 1440);
+  for (int c = 0; c < 12; ++c) {
+    const MaskImage d =
+        discMask(2560, 1440, 200 + (c % 4) * 600, 250 + (c / 4) * 450, 120 + (c * 37) % 150, antiAliased);
+    for (size_t p = 0; p < m.pixels.size(); ++p) m.pixels[p] = std::max(m.pixels[p], d.pixels[p]);
+  }
+  return m;
+}
+
+TEST(PngEncode, RealisticMasksTakeTheDynamicCode) {
+  for (const bool antiAliased : {false, true}) {
+    const MaskImage m = antiAliased ? twelveDiscs(true) : withExtents(twelveDiscs(false));
+    std::vector<uint8_t> dynamicPng, fixedPng;
+    ASSERT_EQ(expectInflatesExactly(m, MaskPngCode::smallest, &dynamicPng), 2);
+    ASSERT_EQ(expectInflatesExactly(m, MaskPngCode::fixed, &fixedPng), 1);
+    EXPECT_LT(dynamicPng.size(), fixedPng.size());
+    if (!antiAliased) {
+      EXPECT_LT(dynamicPng.size() * 2, fixedPng.size());
+    }
+    std::printf("[ info     ] 2560x1440 twelve discs%s: dynamic %zu bytes, fixed %zu bytes\n",
+                antiAliased ? ", anti-aliased" : "", dynamicPng.size(), fixedPng.size());
+    InflatedPng in;
+    ASSERT_TRUE(inflatePng(dynamicPng, in));
+    DynamicHeader header;
+    ASSERT_TRUE(readDynamicHeader(in.zlibStream, header));
+    EXPECT_EQ(kraftSum(header.litLen), 32768u);
+    EXPECT_EQ(kraftSum(header.distance), 32768u);
+  }
+  // All black: one literal, runs at one distance. The distance code still needs (and gets) a valid code.
+  std::vector<uint8_t> png;
+  ASSERT_EQ(expectInflatesExactly(blankMask(2560, 1440), MaskPngCode::smallest, &png), 2);
+  EXPECT_LT(png.size(), 4000u);
+  InflatedPng in;
+  ASSERT_TRUE(inflatePng(png, in));
+  DynamicHeader header;
+  ASSERT_TRUE(readDynamicHeader(in.zlibStream, header));
+  EXPECT_EQ(kraftSum(header.distance), 32768u);
+}
+
+TEST(PngEncode, TinyImagesFallBackToTheFixedCode) {
+  // A dynamic header costs more than the whole fixed-code block here.
+  std::vector<uint8_t> smallest, fixed;
+  const MaskImage m = noiseMask(3, 2, 5, true);
+  EXPECT_EQ(expectInflatesExactly(m, MaskPngCode::smallest, &smallest), 1);
+  EXPECT_EQ(expectInflatesExactly(m, MaskPngCode::fixed, &fixed), 1);
+  EXPECT_EQ(smallest, fixed);
+}
+
+TEST(PngEncode, CodeLengthsAreLimitedTo15Bits) {
+  // Grey values with Fibonacci frequencies: an unlimited Huffman code would be 24 bits deep.
+  std::vector<uint8_t> values;
+  uint32_t a = 1, b = 1;
+  for (uint8_t v = 1; v <= 25; ++v) {
+    values.insert(values.end(), a, v);
+    const uint32_t next = a + b;
+    a = b;
+    b = next;
+  }
+  std::mt19937 rng(99);
+  std::shuffle(values.begin(), values.end(), rng);
+  const uint32_t width = 1000, height = static_cast<uint32_t>((values.size() + width - 1) / width);
+  MaskImage m = blankMask(width, height);
+  std::copy(values.begin(), values.end(), m.pixels.begin());
+  std::vector<uint8_t> png;
+  ASSERT_EQ(expectInflatesExactly(m, MaskPngCode::smallest, &png), 2);
+  InflatedPng in;
+  ASSERT_TRUE(inflatePng(png, in));
+  DynamicHeader header;
+  ASSERT_TRUE(readDynamicHeader(in.zlibStream, header));
+  EXPECT_EQ(*std::max_element(header.litLen.begin(), header.litLen.end()), 15);
+  EXPECT_EQ(kraftSum(header.litLen), 32768u);
+}
+
+TEST(PngEncode, ScratchReuseGivesTheSameBytes) {
+  const std::vector<MaskImage> masks = {twelveDiscs(false), noiseMask(300, 200, 3, false), blankMask(5, 5),
+                                        withExtents(twelveDiscs(false)), twelveDiscs(true)};
+  MaskPngScratch shared;
+  std::vector<uint8_t> reused;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (size_t k = 0; k < masks.size(); ++k) {
+      std::vector<uint8_t> fresh;
+      MaskPngScratch own;
+      encodeMaskPng(masks[k], fresh, own);
+      encodeMaskPng(masks[k], reused, shared);
+      EXPECT_EQ(reused, fresh) << "mask " << k;
+    }
+  }
+  std::vector<uint8_t> plain;  // the overload without a scratch
+  encodeMaskPng(masks[0], plain);
+  encodeMaskPng(masks[0], reused, shared);
+  EXPECT_EQ(plain, reused);
 }
 
 TEST(PngDecode, RejectsGarbage) {
