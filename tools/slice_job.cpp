@@ -248,6 +248,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     MaskImage mask;
     std::vector<ContourSet> sets;
     std::vector<LayerResult> layers;
+    MaskPngScratch pngScratch;
   };
   const BandPlan plan = planBands(planes.size(), options.slice);
   std::vector<SlotState> slots(plan.slots);
@@ -287,7 +288,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       r.area = static_cast<double>(lit) * maskJob.grid.pixel * maskJob.grid.pixel;
     }
     if (png) {
-      encodeMaskPng(s.mask, r.payload);
+      encodeMaskPng(s.mask, r.payload, s.pngScratch);
       r.crc = static_cast<uint32_t>(crc32_z(0, r.payload.data(), r.payload.size()));
     } else {
       encodeMaskRuns(s.mask, r.payload);
