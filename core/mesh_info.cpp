@@ -18,18 +18,24 @@ BoundingBox boundsOf(std::span<const Point3f> points) {
   return box;
 }
 
-double signedVolume(std::span<const Point3f> corners) {
-  const BoundingBox box = boundsOf(corners);
-  const double cx = 0.5 * (double{box.min.x} + box.max.x), cy = 0.5 * (double{box.min.y} + box.max.y),
-               cz = 0.5 * (double{box.min.z} + box.max.z);
+double signedVolumeTerms(std::span<const Point3f> corners, const double centre[3], std::size_t beginFacet,
+                         std::size_t endFacet) {
+  const double cx = centre[0], cy = centre[1], cz = centre[2];
   double sum = 0;
-  for (std::size_t c = 0; c + 2 < corners.size(); c += 3) {
+  for (std::size_t c = 3 * beginFacet; c < 3 * endFacet; c += 3) {
     const double ax = corners[c].x - cx, ay = corners[c].y - cy, az = corners[c].z - cz;
     const double bx = corners[c + 1].x - cx, by = corners[c + 1].y - cy, bz = corners[c + 1].z - cz;
     const double dx = corners[c + 2].x - cx, dy = corners[c + 2].y - cy, dz = corners[c + 2].z - cz;
     sum += ax * (by * dz - bz * dy) - ay * (bx * dz - bz * dx) + az * (bx * dy - by * dx);
   }
-  return sum / 6.0;
+  return sum;
+}
+
+double signedVolume(std::span<const Point3f> corners) {
+  const BoundingBox box = boundsOf(corners);
+  const double centre[3] = {0.5 * (double{box.min.x} + box.max.x), 0.5 * (double{box.min.y} + box.max.y),
+                            0.5 * (double{box.min.z} + box.max.z)};
+  return signedVolumeTerms(corners, centre, 0, corners.size() / 3) / 6.0;
 }
 
 double surfaceArea(std::span<const Point3f> corners) {

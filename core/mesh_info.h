@@ -13,9 +13,9 @@ struct MeshInfo {
   uint64_t facets = 0;
   uint64_t vertices = 0;  // after welding
   BoundingBox bounds;
-  double volume = 0;       // signed; negative for an inside-out mesh
+  double volume = 0;  // signed; negative for an inside-out mesh
   double surfaceArea = 0;
-  uint64_t shells = 0;     // connected components (facets sharing a vertex are connected)
+  uint64_t shells = 0;  // connected components (facets sharing a vertex are connected)
   EdgeStats edges;
 };
 
@@ -23,6 +23,11 @@ BoundingBox boundsOf(std::span<const Point3f> points);
 
 // Signed volume of the soup (divergence theorem, tetrahedra against the bounding-box centre), in double.
 double signedVolume(std::span<const Point3f> corners);
+
+// Six times the signed volume of facets [beginFacet, endFacet) against `centre`: the terms of
+// signedVolume, for callers that sum fixed blocks in parallel (and add them in block order).
+double signedVolumeTerms(std::span<const Point3f> corners, const double centre[3], std::size_t beginFacet,
+                         std::size_t endFacet);
 
 double surfaceArea(std::span<const Point3f> corners);
 

@@ -24,6 +24,7 @@
 #include "io/stl_reader.h"
 #include "io/svg_writer.h"
 #include "io/threemf_writer.h"
+#include "parallel/parallel.h"
 
 namespace toposlice {
 namespace {
@@ -144,6 +145,51 @@ MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::
 
 }  // namespace
 
+// Bounds, signed volume and degenerate facets of a soup, in parallel over fixed blocks of facets whose
+// partial sums are added in block order: the same bits for any thread count.
+struct SoupMeasures {
+  BoundingBox bounds;
+  double volume = 0;
+  uint64_t degenerateFacets = 0;
+};
+
+static SoupMeasures measureSoup(std::span<const Point3f> corners) {
+  constexpr std::size_t kBlock = 32768;  // facets
+  const std::size_t facets = corners.size() / 3, blocks = (facets + kBlock - 1) / kBlock;
+  std::vector<BoundingBox> boxes(blocks);
+  std::vector<uint64_t> degenerate(blocks, 0);
+  std::vector<double> terms(blocks, 0.0);
+  auto blockEnd = [&](std::size_t b) { return std::min(facets, (b + 1) * kBlock); };
+  parallelForChunks(blocks, 1, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b) {
+      boxes[b] = boundsOf(corners.subspan(3 * b * kBlock, 3 * (blockEnd(b) - b * kBlock)));
+      for (std::size_t f = b * kBlock; f < blockEnd(b); ++f)
+        degenerate[b] += isDegenerateFacet(&corners[3 * f]);
+    }
+  });
+  SoupMeasures m;
+  if (blocks == 0) return m;
+  m.bounds = boxes[0];
+  for (const BoundingBox& box : boxes) {
+    m.bounds.min = {std::min(m.bounds.min.x, box.min.x), std::min(m.bounds.min.y, box.min.y),
+                    std::min(m.bounds.min.z, box.min.z)};
+    m.bounds.max = {std::max(m.bounds.max.x, box.max.x), std::max(m.bounds.max.y, box.max.y),
+                    std::max(m.bounds.max.z, box.max.z)};
+  }
+  const double centre[3] = {0.5 * (double{m.bounds.min.x} + m.bounds.max.x),
+                            0.5 * (double{m.bounds.min.y} + m.bounds.max.y),
+                            0.5 * (double{m.bounds.min.z} + m.bounds.max.z)};
+  parallelForChunks(blocks, 1, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b)
+      terms[b] = signedVolumeTerms(corners, centre, b * kBlock, blockEnd(b));
+  });
+  double sum = 0;
+  for (const double t : terms) sum += t;
+  m.volume = sum / 6.0;
+  for (const uint64_t d : degenerate) m.degenerateFacets += d;
+  return m;
+}
+
 std::atomic<bool>& interruptRequested() {
   static std::atomic<bool> requested{false};
   return requested;
@@ -178,16 +224,16 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (const auto& path : *list) features.push_back(readStl(path));
   result.readSeconds = secondsSince(start);
   result.facets = soup.facetCount();
-  result.bounds = boundsOf(soup.corners);
-  result.volume = signedVolume(soup.corners);
+  const SoupMeasures measures = measureSoup(soup.corners);
+  result.bounds = measures.bounds;
+  result.volume = measures.volume;
+  result.degenerateFacets = measures.degenerateFacets;
   result.inverted = result.volume < 0;
   if (result.inverted && options.fixOrientation) {
     for (std::size_t c = 0; c < soup.corners.size(); c += 3)
       std::swap(soup.corners[c + 1], soup.corners[c + 2]);
     result.flipped = true;
   }
-  for (std::size_t c = 0; c < soup.corners.size(); c += 3)
-    result.degenerateFacets += isDegenerateFacet(&soup.corners[c]);
 
   start = std::chrono::steady_clock::now();
   const SliceMethod method = options.slice.method;
