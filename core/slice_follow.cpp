@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "core/crossing.h"
+#include "core/prefetch.h"
 
 namespace toposlice {
 
@@ -176,8 +177,8 @@ bool LoopFollower::advance(const MarchMesh& mesh, uint32_t k, double z, LayerCon
     uint32_t i = firstChanged;
     do {  // loop[i] changed; the run after it ends at the next changed segment (firstChanged at the latest)
       const uint32_t record = loop[i].record;
-      __builtin_prefetch(&mesh.facets[record]);
-      __builtin_prefetch(&marks_[record]);
+      prefetch(&mesh.facets[record]);
+      prefetch(&marks_[record]);
       if (mesh.last[record] >= k) seeds_.push_back(record);
       const uint32_t runBegin = i + 1 == size ? 0 : i + 1;
       uint32_t j = runBegin, length = 0;

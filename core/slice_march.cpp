@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "core/crossing.h"
+#include "core/prefetch.h"
 
 namespace toposlice {
 
@@ -55,9 +56,10 @@ uint32_t marchLayer(std::span<const Point3f> corners, std::span<const int32_t> a
           const Point3f* cb = soup + 3 * std::size_t{b};
           pts[i] = edgeCrossing(cb, kDownEdge[aboveMask(cb, z)], z);
         }
-        out.points.insert(out.points.begin() + static_cast<std::ptrdiff_t>(loopBegin), pts.begin(), pts.end());
-        out.facets.insert(out.facets.begin() + static_cast<std::ptrdiff_t>(loopBegin), scratch.backward.rbegin(),
-                          scratch.backward.rend());
+        out.points.insert(out.points.begin() + static_cast<std::ptrdiff_t>(loopBegin), pts.begin(),
+                          pts.end());
+        out.facets.insert(out.facets.begin() + static_cast<std::ptrdiff_t>(loopBegin),
+                          scratch.backward.rbegin(), scratch.backward.rend());
       }
       ++openCount;
     }
@@ -88,7 +90,7 @@ uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const 
     uint32_t q = start;
     bool closed = false;
     for (;;) {
-      if (cursor < hints) __builtin_prefetch(rec + hint[cursor]);
+      if (cursor < hints) prefetch(rec + hint[cursor]);
       ++cursor;
       scratch.visit.push_back(q);
       stamp[q] = mark;
@@ -126,8 +128,10 @@ uint32_t marchRecordsLayer(std::span<const MarchFacet> records, std::span<const 
           pts[i] = edgeCrossing(rb.corner, kDownEdge[aboveMaskF(rb.corner, zf)], z);
           ids[i] = rb.id;
         }
-        out.points.insert(out.points.begin() + static_cast<std::ptrdiff_t>(loopBegin), pts.begin(), pts.end());
-        out.facets.insert(out.facets.begin() + static_cast<std::ptrdiff_t>(loopBegin), ids.begin(), ids.end());
+        out.points.insert(out.points.begin() + static_cast<std::ptrdiff_t>(loopBegin), pts.begin(),
+                          pts.end());
+        out.facets.insert(out.facets.begin() + static_cast<std::ptrdiff_t>(loopBegin), ids.begin(),
+                          ids.end());
       }
       ++openCount;
     }

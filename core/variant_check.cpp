@@ -4,6 +4,8 @@
 #include <cassert>
 #include <cstdio>
 
+#include "core/prefetch.h"
+
 namespace toposlice {
 namespace {
 
@@ -66,14 +68,6 @@ inline uint32_t positionDifference(const Point3f& p, const Point3f& q) {
   return (std::bit_cast<uint32_t>(p.x + 0.0f) ^ std::bit_cast<uint32_t>(q.x + 0.0f)) |
          (std::bit_cast<uint32_t>(p.y + 0.0f) ^ std::bit_cast<uint32_t>(q.y + 0.0f)) |
          (std::bit_cast<uint32_t>(p.z + 0.0f) ^ std::bit_cast<uint32_t>(q.z + 0.0f));
-}
-
-inline void prefetch(const void* p) {
-#if defined(__GNUC__)
-  __builtin_prefetch(p);
-#else
-  (void)p;
-#endif
 }
 
 // How many facets ahead the screening pass prefetches its neighbours' rows: enough to hide a cache

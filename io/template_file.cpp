@@ -11,6 +11,7 @@
 #include <system_error>
 
 #include "core/adjacency.h"
+#include "core/prefetch.h"
 #include "io/errors.h"
 #include "io/output_file.h"
 
@@ -138,14 +139,6 @@ Header checkHeader(std::span<const std::byte> head, uint64_t fileSize, const std
   if (fileSize < expected) fail(name, "truncated: file has " + sizes);
   if (fileSize > expected) fail(name, "file has " + sizes + " (trailing data or a corrupt facet count)");
   return h;
-}
-
-inline void prefetch(const void* p) {
-#if defined(__GNUC__)
-  __builtin_prefetch(p);
-#else
-  (void)p;
-#endif
 }
 
 // Branch-light pass over the table with the same rules as findBadEntry: nonzero when some entry is
