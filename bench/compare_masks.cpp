@@ -39,7 +39,8 @@ namespace {
 namespace fs = std::filesystem;
 
 bool isLayerName(const std::string& name) {
-  return name.size() > 4 && name.compare(name.size() - 4, 4, ".png") == 0 && name.find('/') == std::string::npos;
+  return name.size() > 4 && name.compare(name.size() - 4, 4, ".png") == 0 &&
+         name.find('/') == std::string::npos;
 }
 
 // One reader per thread: libzip handles must not be shared between threads.
@@ -53,8 +54,9 @@ class LayerSource {
     } else {
       int error = 0;
       zip_ = zip_open(path_.c_str(), ZIP_RDONLY, &error);
-      if (!zip_) throw std::runtime_error(path_.string() + ": not a readable zip archive (libzip error " +
-                                          std::to_string(error) + ")");
+      if (!zip_)
+        throw std::runtime_error(path_.string() + ": not a readable zip archive (libzip error " +
+                                 std::to_string(error) + ")");
       const zip_int64_t n = zip_get_num_entries(zip_, 0);
       for (zip_int64_t i = 0; i < n; ++i) {
         const char* name = zip_get_name(zip_, static_cast<zip_uint64_t>(i), 0);
@@ -112,7 +114,8 @@ void transposeInto(const MaskImage& b, std::vector<uint8_t>& bt) {
   for (uint32_t i0 = 0; i0 < w; i0 += kBlock)
     for (uint32_t j0 = 0; j0 < h; j0 += kBlock)
       for (uint32_t i = i0; i < std::min(w, i0 + kBlock); ++i)
-        for (uint32_t j = j0; j < std::min(h, j0 + kBlock); ++j) bt[size_t{j} * w + i] = b.pixels[size_t{i} * h + j];
+        for (uint32_t j = j0; j < std::min(h, j0 + kBlock); ++j)
+          bt[size_t{j} * w + i] = b.pixels[size_t{i} * h + j];
 }
 
 // `b` holds B's pixels in A's frame (row j of A's width at b + j * width).
@@ -175,12 +178,18 @@ Options parse(int argc, char** argv) {
       if (errno || !end || *end) usage((std::string(what) + ": not a number").c_str());
       return v;
     };
-    if (arg == "--transpose") o.transpose = true;
-    else if (arg == "--first-b") o.firstB = static_cast<size_t>(number("--first-b"));
-    else if (arg == "--threads") o.threads = static_cast<unsigned>(number("--threads"));
-    else if (arg == "-h" || arg == "--help") usage("compares two mask stacks pixel by pixel", 0);
-    else if (arg.size() > 1 && arg[0] == '-') usage(("unknown option " + arg).c_str());
-    else positional.push_back(arg);
+    if (arg == "--transpose")
+      o.transpose = true;
+    else if (arg == "--first-b")
+      o.firstB = static_cast<size_t>(number("--first-b"));
+    else if (arg == "--threads")
+      o.threads = static_cast<unsigned>(number("--threads"));
+    else if (arg == "-h" || arg == "--help")
+      usage("compares two mask stacks pixel by pixel", 0);
+    else if (arg.size() > 1 && arg[0] == '-')
+      usage(("unknown option " + arg).c_str());
+    else
+      positional.push_back(arg);
   }
   if (positional.size() < 2 || positional.size() > 3) usage("expected A B [CSV]");
   o.a = positional[0];
@@ -193,8 +202,8 @@ int run(const Options& o) {
   LayerSource listA(o.a), listB(o.b);
   const size_t layersB = listB.size() > o.firstB ? listB.size() - o.firstB : 0;
   const size_t n = std::min(listA.size(), layersB);
-  std::printf("A: %s: %zu layers\nB: %s: %zu layers%s\n", o.a.c_str(), listA.size(), o.b.c_str(), listB.size(),
-              o.transpose ? " (compared transposed)" : "");
+  std::printf("A: %s: %zu layers\nB: %s: %zu layers%s\n", o.a.c_str(), listA.size(), o.b.c_str(),
+              listB.size(), o.transpose ? " (compared transposed)" : "");
   if (o.firstB) std::printf("A's layer k is compared with B's layer k + %zu\n", o.firstB);
   if (n == 0) throw std::runtime_error("no layers to compare");
 
@@ -212,7 +221,8 @@ int run(const Options& o) {
       std::vector<uint8_t> bt;
       for (size_t k; (k = next.fetch_add(1)) < n;) {
         a.read(k, bytes);
-        if (!decodeMaskPng(bytes, ma)) throw std::runtime_error(o.a + ": " + a.name(k) + ": not a grayscale PNG");
+        if (!decodeMaskPng(bytes, ma))
+          throw std::runtime_error(o.a + ": " + a.name(k) + ": not a grayscale PNG");
         b.read(k + o.firstB, bytes);
         if (!decodeMaskPng(bytes, mb))
           throw std::runtime_error(o.b + ": " + b.name(k + o.firstB) + ": not a grayscale PNG");
@@ -284,8 +294,9 @@ int run(const Options& o) {
                 sumBx / double(litB) - sumAx / double(litA), sumBy / double(litB) - sumAy / double(litA));
   std::vector<size_t> order(n);
   for (size_t k = 0; k < n; ++k) order[k] = k;
-  std::sort(order.begin(), order.end(),
-            [&](size_t x, size_t y) { return results[x].differ > results[y].differ || (results[x].differ == results[y].differ && x < y); });
+  std::sort(order.begin(), order.end(), [&](size_t x, size_t y) {
+    return results[x].differ > results[y].differ || (results[x].differ == results[y].differ && x < y);
+  });
   std::printf("worst layers (layer: differing pixels, lit A / B):");
   for (size_t m = 0; m < std::min<size_t>(5, n); ++m) {
     const LayerResult& r = results[order[m]];

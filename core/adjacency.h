@@ -15,10 +15,10 @@
 namespace toposlice {
 
 struct EdgeStats {
-  uint64_t edges = 0;         // undirected edges (vertex pairs) with two distinct ends
-  uint64_t boundary = 0;      // used by one facet
-  uint64_t nonManifold = 0;   // used by three or more facets
-  uint64_t inconsistent = 0;  // used by two facets in the same direction
+  uint64_t edges = 0;             // undirected edges (vertex pairs) with two distinct ends
+  uint64_t boundary = 0;          // used by one facet
+  uint64_t nonManifold = 0;       // used by three or more facets
+  uint64_t inconsistent = 0;      // used by two facets in the same direction
   uint64_t degenerateFacets = 0;  // facets with a repeated vertex: skipped, all their entries -1
 };
 

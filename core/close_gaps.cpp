@@ -78,13 +78,15 @@ GapStats closeGaps(LayerContours& layer, double maxGap, bool closeRest, GapScrat
   };
   for (uint32_t o = 0; o < n; ++o) {  // chains with a beginning stay open
     if (prev[o] >= 0) continue;
-    for (int32_t c = static_cast<int32_t>(o); c >= 0; c = next[static_cast<uint32_t>(c)]) appendPolyline(static_cast<uint32_t>(c));
+    for (int32_t c = static_cast<int32_t>(o); c >= 0; c = next[static_cast<uint32_t>(c)])
+      appendPolyline(static_cast<uint32_t>(c));
     out.endLoop(false);
     ++stats.leftOpen;
   }
   for (uint32_t o = 0; o < n; ++o) {  // what is left are cycles
     if (used[o]) continue;
-    for (int32_t c = static_cast<int32_t>(o); !used[static_cast<uint32_t>(c)]; c = next[static_cast<uint32_t>(c)])
+    for (int32_t c = static_cast<int32_t>(o); !used[static_cast<uint32_t>(c)];
+         c = next[static_cast<uint32_t>(c)])
       appendPolyline(static_cast<uint32_t>(c));
     out.endLoop(true);
     ++stats.closedLoops;

@@ -36,7 +36,8 @@ void canonicalizeLayer(LayerContours& layer, CanonicalScratch& scratch) {
   auto& order = scratch.order;
   order.resize(loops);
   for (std::size_t l = 0; l < loops; ++l) order[l] = static_cast<uint32_t>(l);
-  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return loopMin[a] < loopMin[b]; });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](uint32_t a, uint32_t b) { return loopMin[a] < loopMin[b]; });
   LayerContours& sorted = scratch.sorted;
   sorted.clear(layer.z);
   for (const uint32_t l : order) {

@@ -22,9 +22,9 @@ struct Point2d {
 struct LayerContours {
   double z = 0;
   std::vector<Point2d> points;
-  std::vector<uint32_t> facets;            // facet of each point (the segment's facet)
-  std::vector<uint32_t> loopOffsets{0};    // loop l is [loopOffsets[l], loopOffsets[l+1])
-  std::vector<uint8_t> loopClosed;         // 1 for a closed loop, 0 for an open polyline (defects)
+  std::vector<uint32_t> facets;          // facet of each point (the segment's facet)
+  std::vector<uint32_t> loopOffsets{0};  // loop l is [loopOffsets[l], loopOffsets[l+1])
+  std::vector<uint8_t> loopClosed;       // 1 for a closed loop, 0 for an open polyline (defects)
 
   std::size_t loopCount() const { return loopOffsets.size() - 1; }
   std::span<const Point2d> loopPoints(std::size_t l) const {

@@ -9,7 +9,8 @@ void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMe
   mesh.layerStart = layers.bucketOffsets;
   mesh.position.assign(facetCount, -1);
   mesh.last.resize(layers.bucketFacets.size());
-  mesh.blockLast.assign((layers.bucketFacets.size() + MarchMesh::kBlockRecords - 1) / MarchMesh::kBlockRecords, 0);
+  mesh.blockLast.assign(
+      (layers.bucketFacets.size() + MarchMesh::kBlockRecords - 1) / MarchMesh::kBlockRecords, 0);
   for (std::size_t p = 0; p < layers.bucketFacets.size(); ++p) {
     mesh.position[layers.bucketFacets[p]] = static_cast<int32_t>(p);
     const uint32_t last = layers.last[layers.bucketFacets[p]];

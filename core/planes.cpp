@@ -35,8 +35,7 @@ std::vector<double> makePlanes(const PlaneSpec& spec, double zmin, double zmax, 
       error = "layer height must be a positive number of millimetres";
       return {};
     }
-    count = spec.layers ? *spec.layers
-                        : static_cast<uint64_t>(std::max(0.0, std::ceil((zmax - z0) / h)));
+    count = spec.layers ? *spec.layers : static_cast<uint64_t>(std::max(0.0, std::ceil((zmax - z0) / h)));
   } else if (spec.layers) {
     if (*spec.layers == 0) {
       error = "the layer count must be at least 1";

@@ -48,7 +48,8 @@ PixelGrid placeGrid(const BoundingBox& box, uint32_t width, uint32_t height, dou
 
 double gridOverhang(const BoundingBox& box, const PixelGrid& grid) {
   const double x1 = grid.x0 + grid.width * grid.pixel, y1 = grid.y0 + grid.height * grid.pixel;
-  return std::max({0.0, grid.x0 - box.min.x, grid.y0 - box.min.y, double{box.max.x} - x1, double{box.max.y} - y1});
+  return std::max(
+      {0.0, grid.x0 - box.min.x, grid.y0 - box.min.y, double{box.max.x} - x1, double{box.max.y} - y1});
 }
 
 }  // namespace toposlice

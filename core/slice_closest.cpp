@@ -36,14 +36,16 @@ uint32_t closestPointLayer(std::span<const Point3f> corners, std::span<const uin
       auto better = [&](uint32_t candidate, double d, double best, bool bestShares) {
         if (d > tolerance2 || d > best) return std::pair{false, false};
         const auto& s = segments[candidate];
-        const bool shares = sharesEdge(a, seg.upEdge, &corners[3 * std::size_t{s.facet}], s.downEdge, tolerance2);
+        const bool shares =
+            sharesEdge(a, seg.upEdge, &corners[3 * std::size_t{s.facet}], s.downEdge, tolerance2);
         return std::pair{d < best || (shares && !bestShares), shares};
       };
       double best = std::numeric_limits<double>::infinity();
       bool bestShares = false;
       std::size_t bestPos = SIZE_MAX;  // position in unexplored; SIZE_MAX - 1 = close the loop
       {
-        const auto [take, shares] = better(first, squaredDistance(seg.end, segments[first].start), best, bestShares);
+        const auto [take, shares] =
+            better(first, squaredDistance(seg.end, segments[first].start), best, bestShares);
         if (take && current != first) {
           best = squaredDistance(seg.end, segments[first].start);
           bestShares = shares;

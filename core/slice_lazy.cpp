@@ -11,7 +11,8 @@ LazySlicer::LazySlicer(std::span<const Point3f> corners, std::span<int32_t> tabl
   scratch_.prepare(corners.size() / 3);
 }
 
-uint32_t LazySlicer::sliceLayer(std::span<const uint32_t> active, double z, uint32_t layer, LayerContours& out) {
+uint32_t LazySlicer::sliceLayer(std::span<const uint32_t> active, double z, uint32_t layer,
+                                LayerContours& out) {
   // Two marks per layer: one for the first march, one for the march after joining.
   const uint32_t firstMark = 2 * layer + 1;
   uint32_t open = marchLayer(corners_, table_, active, z, firstMark, scratch_, out);

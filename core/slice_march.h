@@ -25,8 +25,8 @@ namespace toposlice {
 // marks visited facets with its own non-zero `mark` (layer k uses k + 1), so it is never cleared.
 struct MarchScratch {
   std::vector<uint32_t> stamp;
-  std::vector<uint32_t> backward;  // facets found walking backwards from an open polyline's start
-  CanonicalScratch canonical;      // record kernel: putting loops in canonical order
+  std::vector<uint32_t> backward;              // facets found walking backwards from an open polyline's start
+  CanonicalScratch canonical;                  // record kernel: putting loops in canonical order
   std::vector<uint32_t> visit, previousVisit;  // record kernel: walk order of this and the last layer
   // Call when the next layer is not the one after the last (a new band): drops the prefetch hints.
   void forgetWalk() { visit.clear(); }

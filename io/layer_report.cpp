@@ -16,8 +16,9 @@ LayerReport::~LayerReport() = default;
 
 void LayerReport::addLayer(uint32_t index, double z, double areaMm2, uint64_t loops, uint64_t islands) {
   char line[160];
-  const int n = std::snprintf(line, sizeof line, "%u,%.6f,%.6f,%llu,%llu\n", index, z, areaMm2,
-                              static_cast<unsigned long long>(loops), static_cast<unsigned long long>(islands));
+  const int n =
+      std::snprintf(line, sizeof line, "%u,%.6f,%.6f,%llu,%llu\n", index, z, areaMm2,
+                    static_cast<unsigned long long>(loops), static_cast<unsigned long long>(islands));
   file_->write(line, static_cast<std::size_t>(n));
 }
 

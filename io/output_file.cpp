@@ -63,7 +63,6 @@ std::string outputExistsMessage(const std::filesystem::path& p) {
   return p.string() + ": already exists (use --force to overwrite)";
 }
 
-
 void removePendingOutputs() noexcept {
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
     if (gPending[i].state.load(std::memory_order_acquire) == 2) ::unlink(gPending[i].path);

@@ -31,10 +31,10 @@ const char* sliceMethodName(SliceMethod method);
 
 struct SliceSettings {
   SliceMethod method = SliceMethod::SelfReuse;
-  uint32_t bandLayers = 0;       // layers per band; 0 picks a size from the layer and thread counts
-  double joinTolerance = 1e-5;   // mm; cp and sr-lazy join segment ends closer than this
-  double closeGaps = 0.05;       // mm; open polylines (defective meshes) are bridged up to this gap
-  bool closeRemaining = true;    // then close what is still open on itself (close_gaps.h)
+  uint32_t bandLayers = 0;      // layers per band; 0 picks a size from the layer and thread counts
+  double joinTolerance = 1e-5;  // mm; cp and sr-lazy join segment ends closer than this
+  double closeGaps = 0.05;      // mm; open polylines (defective meshes) are bridged up to this gap
+  bool closeRemaining = true;   // then close what is still open on itself (close_gaps.h)
   CandidateSearch candidates = CandidateSearch::Sweep;
 };
 
@@ -52,9 +52,9 @@ using LayerConsumer = std::function<void(uint32_t layer, const LayerContours& co
 // all -1, or a template's), copied and completed as layers need it; unused for ClosestPoint. The
 // caller's table is never modified. `consume` is called once per layer, in layer order, from one thread
 // at a time. Progress counts layers.
-SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency, std::span<const double> planes,
-                      const SliceSettings& settings, const LayerConsumer& consume,
-                      const ProgressContext* progress = nullptr);
+SliceStats sliceModel(std::span<const Point3f> corners, std::span<const int32_t> adjacency,
+                      std::span<const double> planes, const SliceSettings& settings,
+                      const LayerConsumer& consume, const ProgressContext* progress = nullptr);
 
 // Several meshes on one z grid (a model and its add-on / removal features, each with its own table),
 // with an optional parallel stage per layer (rasterize, encode) before the in-order consumer.
@@ -74,15 +74,18 @@ struct LayerStages {
   // Optional. Runs in parallel, once per layer, after every mesh of the layer is sliced. `meshes[i]` is
   // mesh i's contours; `slot` < plan.slots and `position` < plan.bandLayers name storage the caller owns
   // for this layer until its consume call (no other running call uses the same pair).
-  std::function<void(uint32_t layer, std::span<const LayerContours> meshes, std::size_t slot, uint32_t position)>
+  std::function<void(uint32_t layer, std::span<const LayerContours> meshes, std::size_t slot,
+                     uint32_t position)>
       process;
   // Runs in layer order from one thread at a time, with the same slot and position.
-  std::function<void(uint32_t layer, std::span<const LayerContours> meshes, std::size_t slot, uint32_t position)>
+  std::function<void(uint32_t layer, std::span<const LayerContours> meshes, std::size_t slot,
+                     uint32_t position)>
       consume;
 };
 
 // Stats count the first mesh (the model) only; gaps are bridged in every mesh.
-SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double> planes, const SliceSettings& settings,
-                       const LayerStages& stages, const ProgressContext* progress = nullptr);
+SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double> planes,
+                       const SliceSettings& settings, const LayerStages& stages,
+                       const ProgressContext* progress = nullptr);
 
 }  // namespace toposlice

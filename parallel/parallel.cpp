@@ -23,7 +23,8 @@ ThreadLimit::ThreadLimit(unsigned threads) : impl_(std::make_unique<Impl>()) {
 ThreadLimit::~ThreadLimit() = default;
 
 unsigned ThreadLimit::available() {
-  return static_cast<unsigned>(tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
+  return static_cast<unsigned>(
+      tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
 
 // oneTBB synchronises its workers inside libtbb, which is not built with ThreadSanitizer, so TSan cannot
@@ -44,7 +45,8 @@ void parallelForChunks(std::size_t count, std::size_t grain,
   (void)handoff.load(std::memory_order_acquire);
 }
 
-void orderedPipeline(std::size_t count, std::size_t inFlight, const std::function<void(std::size_t, std::size_t)>& work,
+void orderedPipeline(std::size_t count, std::size_t inFlight,
+                     const std::function<void(std::size_t, std::size_t)>& work,
                      const std::function<void(std::size_t, std::size_t)>& consume) {
   if (count == 0) return;
   if (inFlight == 0) inFlight = 1;
@@ -59,31 +61,27 @@ void orderedPipeline(std::size_t count, std::size_t inFlight, const std::functio
   std::size_t next = 0;
   tbb::parallel_pipeline(
       inFlight,
-      tbb::make_filter<void, Token>(tbb::filter_mode::serial_in_order,
-                                    [&](tbb::flow_control& fc) -> Token {
-                                      if (next == count) {
-                                        fc.stop();
-                                        return {};
-                                      }
-                                      std::size_t slot = 0;
-                                      freeSlots.pop(slot);  // never blocks: tokens <= slots
-                                      return {next++, slot};
-                                    }) &
-          tbb::make_filter<Token, Token>(tbb::filter_mode::parallel,
-                                         [&](Token t) {
-                                           (void)slotSync[t.slot].load(std::memory_order_acquire);
-                                           work(t.task, t.slot);
-                                           slotSync[t.slot].fetch_add(1, std::memory_order_release);
-                                           return t;
-                                         }) &
-          tbb::make_filter<Token, void>(tbb::filter_mode::serial_in_order, [&](Token t) {
-            (void)slotSync[t.slot].load(std::memory_order_acquire);
-            (void)consumeSync.load(std::memory_order_acquire);
-            consume(t.task, t.slot);
-            consumeSync.fetch_add(1, std::memory_order_release);
-            slotSync[t.slot].fetch_add(1, std::memory_order_release);
-            freeSlots.push(t.slot);
-          }));
+      tbb::make_filter<void, Token>(tbb::filter_mode::serial_in_order, [&](tbb::flow_control& fc) -> Token {
+        if (next == count) {
+          fc.stop();
+          return {};
+        }
+        std::size_t slot = 0;
+        freeSlots.pop(slot);  // never blocks: tokens <= slots
+        return {next++, slot};
+      }) & tbb::make_filter<Token, Token>(tbb::filter_mode::parallel, [&](Token t) {
+        (void)slotSync[t.slot].load(std::memory_order_acquire);
+        work(t.task, t.slot);
+        slotSync[t.slot].fetch_add(1, std::memory_order_release);
+        return t;
+      }) & tbb::make_filter<Token, void>(tbb::filter_mode::serial_in_order, [&](Token t) {
+        (void)slotSync[t.slot].load(std::memory_order_acquire);
+        (void)consumeSync.load(std::memory_order_acquire);
+        consume(t.task, t.slot);
+        consumeSync.fetch_add(1, std::memory_order_release);
+        slotSync[t.slot].fetch_add(1, std::memory_order_release);
+        freeSlots.push(t.slot);
+      }));
   (void)consumeSync.load(std::memory_order_acquire);
 }
 

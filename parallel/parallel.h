@@ -32,7 +32,8 @@ void parallelForChunks(std::size_t count, std::size_t grain,
 // `inFlight` tasks at once, each given a slot index in [0, inFlight) that no other running task holds
 // (for per-slot buffers); then consume(i, slot) runs serially, in ascending i. Memory stays bounded by
 // the slots whatever the task count.
-void orderedPipeline(std::size_t count, std::size_t inFlight, const std::function<void(std::size_t, std::size_t)>& work,
+void orderedPipeline(std::size_t count, std::size_t inFlight,
+                     const std::function<void(std::size_t, std::size_t)>& work,
                      const std::function<void(std::size_t, std::size_t)>& consume);
 
 }  // namespace toposlice

@@ -36,7 +36,8 @@ void expectConsistent(const Built& b) {
       for (unsigned m = 0; m < 3; ++m) {
         if (fv[3 * k + (m + 1) % 3] == to && fv[3 * k + (m + 2) % 3] == from) {
           ++found;
-          EXPECT_EQ(b.table[3 * k + m], static_cast<int32_t>(i)) << "asymmetric at facet " << i << " edge " << j;
+          EXPECT_EQ(b.table[3 * k + m], static_cast<int32_t>(i))
+              << "asymmetric at facet " << i << " edge " << j;
         }
       }
       EXPECT_EQ(found, 1) << "facet " << i << " edge " << j;
@@ -45,8 +46,8 @@ void expectConsistent(const Built& b) {
 }
 
 TEST(Adjacency, ClosedShapesHaveNoMissingEntries) {
-  for (const FacetSoup& soup : {fixtures::box(0, 0, 0, 1, 1, 1), fixtures::sphere(2, 40, 20), fixtures::torus(3, 1, 48, 24),
-                                fixtures::squareFrame(3, 1, 0, 1)}) {
+  for (const FacetSoup& soup : {fixtures::box(0, 0, 0, 1, 1, 1), fixtures::sphere(2, 40, 20),
+                                fixtures::torus(3, 1, 48, 24), fixtures::squareFrame(3, 1, 0, 1)}) {
     const Built b = build(soup);
     EXPECT_EQ(b.stats.boundary, 0u);
     EXPECT_EQ(b.stats.nonManifold, 0u);
@@ -93,7 +94,8 @@ TEST(MeshInfo, VolumeAreaShells) {
   const IndexedMesh mesh = weldCorners(soup.corners);
   EXPECT_EQ(countShells(mesh.facetVertices, mesh.vertices.size()), 2u);
   // Inside-out: reversing every facet negates the volume.
-  for (std::size_t c = 0; c < soup.corners.size(); c += 3) std::swap(soup.corners[c + 1], soup.corners[c + 2]);
+  for (std::size_t c = 0; c < soup.corners.size(); c += 3)
+    std::swap(soup.corners[c + 1], soup.corners[c + 2]);
   EXPECT_NEAR(signedVolume(soup.corners), -25.0, 1e-9);
 }
 

@@ -42,7 +42,8 @@ using namespace std::chrono_literals;
 // Paths
 
 fs::path toposliceBinary() {
-  if (const char* env = std::getenv("TOPOSLICE_BIN"); env != nullptr && *env != '\0') return fs::absolute(env);
+  if (const char* env = std::getenv("TOPOSLICE_BIN"); env != nullptr && *env != '\0')
+    return fs::absolute(env);
   return fs::absolute(TOPOSLICE_BIN_PATH);
 }
 
@@ -144,7 +145,8 @@ uint64_t litPixelsInDirectory(const fs::path& dir, std::size_t* images = nullptr
       continue;
     }
     ++count;
-    lit += static_cast<uint64_t>(std::count_if(mask.pixels.begin(), mask.pixels.end(), [](uint8_t v) { return v != 0; }));
+    lit += static_cast<uint64_t>(
+        std::count_if(mask.pixels.begin(), mask.pixels.end(), [](uint8_t v) { return v != 0; }));
   }
   if (images) *images = count;
   return lit;
@@ -177,7 +179,7 @@ struct RunResult {
   int code() const { return WIFEXITED(status) ? WEXITSTATUS(status) : -1; }
   bool signalled(int signal) const { return WIFSIGNALED(status) && WTERMSIG(status) == signal; }
   std::string describe() const {
-    std::string d = WIFEXITED(status) ? "exit " + std::to_string(WEXITSTATUS(status))
+    std::string d = WIFEXITED(status)     ? "exit " + std::to_string(WEXITSTATUS(status))
                     : WIFSIGNALED(status) ? "signal " + std::to_string(WTERMSIG(status))
                                           : "status " + std::to_string(status);
     return d + "\n--- stdout:\n" + out + "--- stderr:\n" + err;
@@ -295,7 +297,9 @@ using CliToolFeatures = CliToolBase;
 using CliToolInterrupt = CliToolBase;
 using CliToolQuiet = CliToolBase;
 
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+bool contains(const std::string& text, const std::string& part) {
+  return text.find(part) != std::string::npos;
+}
 
 // ---------------------------------------------------------------------------------------------------
 // 1. --help
@@ -305,9 +309,10 @@ TEST_F(CliToolHelp, ProgramAndEverySubcommandListTheirKeyOptions) {
       {{"--help"}, {"info", "slice", "template", "batch", "--version"}},
       {{"info", "--help"}, {"model", "--threads", "--quiet"}},
       {{"slice", "--help"},
-       {"--layer-height", "-H", "--layers", "--z0", "--method", "cp", "sr-lazy", "--cli-binary", "--masks",
-        "--printer", "--template", "--on-mismatch", "--band-layers", "--threads", "--quiet", "--force", "--add",
-        "--remove", "--report", "--crop", "--output"}},
+       {"--layer-height", "-H",           "--layers", "--z0",      "--method",   "cp",
+        "sr-lazy",        "--cli-binary", "--masks",  "--printer", "--template", "--on-mismatch",
+        "--band-layers",  "--threads",    "--quiet",  "--force",   "--add",      "--remove",
+        "--report",       "--crop",       "--output"}},
       {{"template", "--help"}, {"model", "--output", "--force", "--quiet"}},
       {{"batch", "--help"}, {"job", "--threads", "--quiet"}},
   };
@@ -316,7 +321,8 @@ TEST_F(CliToolHelp, ProgramAndEverySubcommandListTheirKeyOptions) {
     const std::string what = testing::PrintToString(args);
     EXPECT_EQ(r.code(), 0) << what << ": " << r.describe();
     EXPECT_TRUE(r.err.empty()) << what << ": " << r.describe();
-    for (const auto& w : words) EXPECT_TRUE(contains(r.out, w)) << what << " does not mention " << w << "\n" << r.out;
+    for (const auto& w : words)
+      EXPECT_TRUE(contains(r.out, w)) << what << " does not mention " << w << "\n" << r.out;
   }
 }
 
@@ -370,8 +376,8 @@ TEST_F(CliToolSliceErrors, MissingModelIsOneErrorLineNamingThePath) {
 
 TEST_F(CliToolSliceErrors, TruncatedStlIsReportedAndWritesNothing) {
   writeBytes(path("cut.stl"), readBytes(examplePart()).substr(0, 500));
-  const RunResult r = run({"slice", "cut.stl", "-o", "out.cli", "--masks", "out.sl1", "--printer", "sl1",
-                           "--report", "r.csv"});
+  const RunResult r = run(
+      {"slice", "cut.stl", "-o", "out.cli", "--masks", "out.sl1", "--printer", "sl1", "--report", "r.csv"});
   expectOneErrorLine(r);
   EXPECT_TRUE(contains(r.err, "cut.stl")) << r.err;
   EXPECT_TRUE(contains(r.err, "truncated")) << r.err;
@@ -459,8 +465,8 @@ TEST_F(CliToolOverwrite, ExistingOutputIsKeptWithoutForceAndReplacedWithIt) {
 
 TEST_F(CliToolOverwrite, OneExistingOutputLeavesTheOthersUnwritten) {
   writeBytes(path("r.csv"), "keep\n");
-  const RunResult r = run({"slice", examplePart().string(), "-H", "0.5", "-o", "out.cli", "--masks", "out.sl1",
-                           "--printer", "sl1", "--report", "r.csv"});
+  const RunResult r = run({"slice", examplePart().string(), "-H", "0.5", "-o", "out.cli", "--masks",
+                           "out.sl1", "--printer", "sl1", "--report", "r.csv"});
   expectOneErrorLine(r);
   EXPECT_TRUE(contains(r.err, "r.csv")) << r.err;
   EXPECT_TRUE(contains(r.err, "already exists")) << r.err;
@@ -486,19 +492,20 @@ TEST_F(CliToolOverwrite, FailedRunWithTheSameOutputTwiceLeavesNoOutput) {
 
 TEST_F(CliToolDeterminism, ExamplePartIsByteIdenticalForEveryThreadCountAndBandSize) {
   const std::vector<std::pair<std::string, std::vector<std::string>>> variants{
-      {"t1", {"--threads", "1"}}, {"t2", {"--threads", "2"}},     {"t8", {"--threads", "8"}},
+      {"t1", {"--threads", "1"}},     {"t2", {"--threads", "2"}},     {"t8", {"--threads", "8"}},
       {"b1", {"--band-layers", "1"}}, {"b7", {"--band-layers", "7"}},
   };
   std::string refCli, refSl1;
   std::map<std::string, std::string> refPng;
   for (const auto& [tag, extra] : variants) {
-    std::vector<std::string> args{"slice", examplePart().string(), "-H", "0.05", "-o", tag + ".cli", "--cli-binary",
-                                  "--masks", tag + ".sl1", "--printer", "sl1", "-q"};
+    std::vector<std::string> args{
+        "slice",   examplePart().string(), "-H",        "0.05", "-o", tag + ".cli", "--cli-binary",
+        "--masks", tag + ".sl1",           "--printer", "sl1",  "-q"};
     args.insert(args.end(), extra.begin(), extra.end());
     const RunResult a = run(args);
     ASSERT_EQ(a.code(), 0) << tag << ": " << a.describe();
-    std::vector<std::string> pngArgs{"slice", examplePart().string(), "-H", "0.05", "--masks", tag + "_png",
-                                     "--printer", "sl1", "-q"};
+    std::vector<std::string> pngArgs{
+        "slice", examplePart().string(), "-H", "0.05", "--masks", tag + "_png", "--printer", "sl1", "-q"};
     pngArgs.insert(pngArgs.end(), extra.begin(), extra.end());
     const RunResult b = run(pngArgs);
     ASSERT_EQ(b.code(), 0) << tag << ": " << b.describe();
@@ -562,9 +569,8 @@ TEST_F(CliToolTemplate, MismatchingVariantsAndBadTablesAreRefused) {
 
   // Another shape model: a different facet count.
   {
-    const RunResult r =
-        run({"slice", sharedModel("knee_tibia_ssm_S001.stl").string(), "-H", "0.5", "--template", "t.topo", "-o",
-             "tibia.cli"});
+    const RunResult r = run({"slice", sharedModel("knee_tibia_ssm_S001.stl").string(), "-H", "0.5",
+                             "--template", "t.topo", "-o", "tibia.cli"});
     expectOneErrorLine(r);
     EXPECT_TRUE(contains(r.err, "knee_tibia_ssm_S001.stl")) << r.err;
     EXPECT_TRUE(contains(r.err, "does not share the template's connectivity")) << r.err;
@@ -589,12 +595,13 @@ TEST_F(CliToolTemplate, MismatchingVariantsAndBadTablesAreRefused) {
     EXPECT_TRUE(contains(r.err, "does not share the template's connectivity")) << r.err;
     bool namesFacet = false;
     for (std::size_t p = r.err.find("facet "); p != std::string::npos; p = r.err.find("facet ", p + 1))
-      namesFacet = namesFacet || (p + 6 < r.err.size() && std::isdigit(static_cast<unsigned char>(r.err[p + 6])));
+      namesFacet =
+          namesFacet || (p + 6 < r.err.size() && std::isdigit(static_cast<unsigned char>(r.err[p + 6])));
     EXPECT_TRUE(namesFacet) << "no facet index in: " << r.err;
     EXPECT_FALSE(fs::exists(path("sw.cli")));
 
-    const RunResult rebuilt = run({"slice", "swapped.stl", "-H", "0.5", "--template", "t.topo", "--on-mismatch",
-                                   "rebuild", "-o", "sw.cli"});
+    const RunResult rebuilt = run({"slice", "swapped.stl", "-H", "0.5", "--template", "t.topo",
+                                   "--on-mismatch", "rebuild", "-o", "sw.cli"});
     ASSERT_EQ(rebuilt.code(), 0) << rebuilt.describe();
     EXPECT_TRUE(contains(rebuilt.out, "rebuilt")) << rebuilt.out;
     EXPECT_TRUE(readBytes(path("sw.cli")).starts_with("$$HEADERSTART\n"));
@@ -660,23 +667,29 @@ TEST_F(CliToolBatch, SlicesEveryMatchingVariantReportsTheMismatchAndSkipsComplet
       "{\n"
       "  \"version\": 1,\n"
       "  \"description\": \"femur variants and one tibia that does not fit the template\",\n"
-      "  \"template\": {\"model\": " + jsonString(sharedModel("knee_femur_ssm_S001.stl").string()) +
+      "  \"template\": {\"model\": " +
+      jsonString(sharedModel("knee_femur_ssm_S001.stl").string()) +
       ", \"table\": \"tables/femur.topo\"},\n"
       "  \"settings\": {\"layer_height\": 0.5, \"method\": \"sr\"},\n"
       "  \"variants\": [\n"
-      "    {\"name\": \"s002\", \"model\": " + jsonString(sharedModel("knee_femur_ssm_S002.stl").string()) +
+      "    {\"name\": \"s002\", \"model\": " +
+      jsonString(sharedModel("knee_femur_ssm_S002.stl").string()) +
       ", \"contours\": \"out/s002.cli\"},\n"
-      "    {\"name\": \"s003\", \"model\": " + jsonString(sharedModel("knee_femur_ssm_S003.stl").string()) +
+      "    {\"name\": \"s003\", \"model\": " +
+      jsonString(sharedModel("knee_femur_ssm_S003.stl").string()) +
       ", \"contours\": \"out/s003.cli\"},\n"
-      "    {\"name\": \"mean\", \"model\": " + jsonString(sharedModel("knee_femur_ssm_mean.stl").string()) +
+      "    {\"name\": \"mean\", \"model\": " +
+      jsonString(sharedModel("knee_femur_ssm_mean.stl").string()) +
       ", \"contours\": \"out/mean.cli\"},\n"
-      "    {\"name\": \"tibia\", \"model\": " + jsonString(sharedModel("knee_tibia_ssm_S001.stl").string()) +
+      "    {\"name\": \"tibia\", \"model\": " +
+      jsonString(sharedModel("knee_tibia_ssm_S001.stl").string()) +
       ", \"contours\": \"out/tibia.cli\"}\n"
       "  ]\n"
       "}\n";
   writeBytes(path("job.json"), json);
-  const std::vector<std::pair<std::string, std::string>> femurs{
-      {"s002", "knee_femur_ssm_S002.stl"}, {"s003", "knee_femur_ssm_S003.stl"}, {"mean", "knee_femur_ssm_mean.stl"}};
+  const std::vector<std::pair<std::string, std::string>> femurs{{"s002", "knee_femur_ssm_S002.stl"},
+                                                                {"s003", "knee_femur_ssm_S003.stl"},
+                                                                {"mean", "knee_femur_ssm_mean.stl"}};
 
   const RunResult first = run({"batch", "job.json"});
   EXPECT_EQ(first.code(), 1) << first.describe();
@@ -690,7 +703,8 @@ TEST_F(CliToolBatch, SlicesEveryMatchingVariantReportsTheMismatchAndSkipsComplet
   EXPECT_TRUE(fs::exists(path("tables/femur.topo")));
 
   // Every output equals a single `slice --template` run with the same settings.
-  const RunResult t = run({"template", sharedModel("knee_femur_ssm_S001.stl").string(), "-o", "t.topo", "-q"});
+  const RunResult t =
+      run({"template", sharedModel("knee_femur_ssm_S001.stl").string(), "-o", "t.topo", "-q"});
   ASSERT_EQ(t.code(), 0) << t.describe();
   EXPECT_TRUE(readBytes(path("t.topo")) == readBytes(path("tables/femur.topo")));
   std::map<std::string, FileStamp> stamps;
@@ -698,8 +712,8 @@ TEST_F(CliToolBatch, SlicesEveryMatchingVariantReportsTheMismatchAndSkipsComplet
   for (const auto& [name, model] : femurs) {
     const fs::path out = path("out/" + name + ".cli");
     ASSERT_TRUE(fs::exists(out)) << out;
-    const RunResult single = run({"slice", sharedModel(model).string(), "-H", "0.5", "--template", "t.topo", "-o",
-                                  name + "_single.cli", "-q"});
+    const RunResult single = run({"slice", sharedModel(model).string(), "-H", "0.5", "--template", "t.topo",
+                                  "-o", name + "_single.cli", "-q"});
     ASSERT_EQ(single.code(), 0) << single.describe();
     bytes[name] = readBytes(out);
     EXPECT_TRUE(bytes[name] == readBytes(path(name + "_single.cli"))) << name << ": batch and slice differ";
@@ -725,8 +739,8 @@ TEST_F(CliToolBatch, SlicesEveryMatchingVariantReportsTheMismatchAndSkipsComplet
 // 8. masks and report
 
 TEST_F(CliToolMasks, Sl1ArchiveAndReportOfTheExamplePart) {
-  const RunResult r = run({"slice", examplePart().string(), "--masks", "out.sl1", "--printer", "sl1", "-H", "0.05",
-                           "--report", "r.csv"});
+  const RunResult r = run({"slice", examplePart().string(), "--masks", "out.sl1", "--printer", "sl1", "-H",
+                           "0.05", "--report", "r.csv"});
   ASSERT_EQ(r.code(), 0) << r.describe();
   EXPECT_TRUE(contains(r.out, "resin")) << r.out;
 
@@ -735,8 +749,9 @@ TEST_F(CliToolMasks, Sl1ArchiveAndReportOfTheExamplePart) {
   EXPECT_EQ(names.size(), kLayers + 2);
   EXPECT_EQ(std::count(names.begin(), names.end(), "config.ini"), 1);
   EXPECT_EQ(std::count(names.begin(), names.end(), "prusaslicer.ini"), 1);
-  EXPECT_EQ(std::count_if(names.begin(), names.end(), [](const std::string& n) { return n.ends_with(".png"); }),
-            static_cast<std::ptrdiff_t>(kLayers));
+  EXPECT_EQ(
+      std::count_if(names.begin(), names.end(), [](const std::string& n) { return n.ends_with(".png"); }),
+      static_cast<std::ptrdiff_t>(kLayers));
 
   const auto lines = splitLines(readBytes(path("r.csv")));
   ASSERT_EQ(lines.size(), kLayers + 2);
@@ -749,23 +764,23 @@ TEST_F(CliToolMasks, Sl1ArchiveAndReportOfTheExamplePart) {
   const double ml = std::stod(last.substr(15));
   // Square frame 12 x 12 with a 6 x 6 hole, 4 mm tall; torus R = 4, r = 1.2; sphere r = 1.5.
   const double pi = std::numbers::pi;
-  const double analyticMm3 = (12.0 * 12.0 - 6.0 * 6.0) * 4.0 + 2.0 * pi * pi * 4.0 * 1.2 * 1.2 +
-                             4.0 / 3.0 * pi * 1.5 * 1.5 * 1.5;
+  const double analyticMm3 =
+      (12.0 * 12.0 - 6.0 * 6.0) * 4.0 + 2.0 * pi * pi * 4.0 * 1.2 * 1.2 + 4.0 / 3.0 * pi * 1.5 * 1.5 * 1.5;
   EXPECT_NEAR(ml, analyticMm3 / 1000.0, 0.02 * analyticMm3 / 1000.0) << last;
   expectNoTemporaries();
 }
 
 TEST_F(CliToolMasks, ModelThatDoesNotFitNeedsCrop) {
-  const RunResult r = run({"slice", examplePart().string(), "--layers", "4", "--masks", "m.sl1", "--printer", "sl1",
-                           "--pixel", "0.001"});
+  const RunResult r = run({"slice", examplePart().string(), "--layers", "4", "--masks", "m.sl1", "--printer",
+                           "sl1", "--pixel", "0.001"});
   expectOneErrorLine(r);
   EXPECT_TRUE(contains(r.err, "does not fit")) << r.err;
   EXPECT_TRUE(contains(r.err, "--crop")) << r.err;
   EXPECT_FALSE(fs::exists(path("m.sl1")));
   expectNoTemporaries();
 
-  const RunResult cropped = run({"slice", examplePart().string(), "--layers", "4", "--masks", "m.sl1", "--printer",
-                                 "sl1", "--pixel", "0.001", "--crop"});
+  const RunResult cropped = run({"slice", examplePart().string(), "--layers", "4", "--masks", "m.sl1",
+                                 "--printer", "sl1", "--pixel", "0.001", "--crop"});
   ASSERT_EQ(cropped.code(), 0) << cropped.describe();
   EXPECT_EQ(zipEntryNames(readBytes(path("m.sl1"))).size(), 4u + 2u);
   expectNoTemporaries();
@@ -807,9 +822,9 @@ TEST_F(CliToolFeatures, AddOnsLightMorePixelsAndEngravingsFewer) {
   // The template's table is not touched by features: the next stage slices with it and an add-on.
   const RunResult t = run({"template", aligner, "-o", "aligner.topo", "-q"});
   ASSERT_EQ(t.code(), 0) << t.describe();
-  const RunResult stage2 = run({"slice", sharedModel("derived/aligner_upper_case0_stage2.stl.gz").string(),
-                                "--template", "aligner.topo", "--add", monogram, "--masks", "stage2", "--layers",
-                                "40", "--printer", "sl1"});
+  const RunResult stage2 =
+      run({"slice", sharedModel("derived/aligner_upper_case0_stage2.stl.gz").string(), "--template",
+           "aligner.topo", "--add", monogram, "--masks", "stage2", "--layers", "40", "--printer", "sl1"});
   ASSERT_EQ(stage2.code(), 0) << stage2.describe();
   EXPECT_TRUE(contains(stage2.out, "loaded from template")) << stage2.out;
   EXPECT_GT(litPixelsInDirectory(path("stage2"), &images), 0u);
@@ -822,8 +837,8 @@ TEST_F(CliToolFeatures, AddOnsLightMorePixelsAndEngravingsFewer) {
 
 // Starts a long slice, waits until an output temporary appears (at most 15 s) and holds bytes (at most
 // 1.5 s more), sends `signal`, and checks the run ended early and left nothing behind.
-void interruptAndCheck(CliToolBase& t, const std::vector<std::string>& args, int signal, const fs::path& output,
-                       RunResult& result) {
+void interruptAndCheck(CliToolBase& t, const std::vector<std::string>& args, int signal,
+                       const fs::path& output, RunResult& result) {
   const auto begin = std::chrono::steady_clock::now();
   const pid_t pid = t.start(args);
   ASSERT_GT(pid, 0);
@@ -869,16 +884,16 @@ void interruptAndCheck(CliToolBase& t, const std::vector<std::string>& args, int
 TEST_F(CliToolInterrupt, SigtermDuringSl1OutputLeavesNothing) {
   RunResult r;
   interruptAndCheck(*this,
-                    {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001", "--masks",
-                     "big.sl1", "--printer", "sl1", "-q"},
+                    {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001",
+                     "--masks", "big.sl1", "--printer", "sl1", "-q"},
                     SIGTERM, path("big.sl1"), r);
 }
 
 TEST_F(CliToolInterrupt, SigtermDuringPngFolderOutputLeavesNothing) {
   RunResult r;
   interruptAndCheck(*this,
-                    {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001", "--masks",
-                     "bigpng", "--printer", "sl1", "-q"},
+                    {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001",
+                     "--masks", "bigpng", "--printer", "sl1", "-q"},
                     SIGTERM, path("bigpng"), r);
 }
 
@@ -907,8 +922,8 @@ TEST_F(CliToolQuiet, QuietPrintsNothingOnSuccess) {
 }
 
 TEST_F(CliToolQuiet, NoProgressBarWhenStderrIsNotATerminal) {
-  const RunResult r = run({"slice", examplePart().string(), "-H", "0.05", "-o", "p.cli", "--masks", "p.sl1",
-                           "--printer", "sl1"});
+  const RunResult r = run(
+      {"slice", examplePart().string(), "-H", "0.05", "-o", "p.cli", "--masks", "p.sl1", "--printer", "sl1"});
   ASSERT_EQ(r.code(), 0) << r.describe();
   EXPECT_TRUE(r.err.empty()) << r.err;
   EXPECT_TRUE(contains(r.out, "wrote      : p.cli")) << r.out;

@@ -19,16 +19,16 @@
 #include "core/contours.h"
 #include "io/cli_writer.h"
 #include "io/errors.h"
-#include "tests/fixtures/scratch_dir.h"
 #include "io/output_file.h"
+#include "tests/fixtures/scratch_dir.h"
 
 namespace toposlice {
 namespace {
 
 namespace fs = std::filesystem;
 
-using fixtures::ScratchDir;
 using fixtures::readFile;
+using fixtures::ScratchDir;
 
 void writeText(const fs::path& p, const std::string& text) {
   std::ofstream out(p, std::ios::binary);

@@ -89,11 +89,13 @@ TEST(DefectRepair, FlippingAnInsideOutMeshGivesOuterLoops) {
   const auto planes = layersOver(soup, 20);
   auto totalArea = [&] {
     double area = 0;
-    for (const auto& layer : fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse)) area += layerSignedArea(layer);
+    for (const auto& layer : fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse))
+      area += layerSignedArea(layer);
     return area;
   };
   EXPECT_LT(totalArea(), 0.0);
-  for (std::size_t c = 0; c < soup.corners.size(); c += 3) std::swap(soup.corners[c + 1], soup.corners[c + 2]);
+  for (std::size_t c = 0; c < soup.corners.size(); c += 3)
+    std::swap(soup.corners[c + 1], soup.corners[c + 2]);
   EXPECT_GT(signedVolume(soup.corners), 0.0);
   EXPECT_GT(totalArea(), 0.0);
 }
@@ -108,7 +110,8 @@ TEST(DefectRepair, MasksWithOnePercentOfFacetsDeletedAgreeWithIntactModel) {
   FacetSoup holed;
   for (std::size_t f = 0; f < intact.facetCount(); ++f)
     if (f % 100 != 50)
-      holed.corners.insert(holed.corners.end(), intact.corners.begin() + 3 * f, intact.corners.begin() + 3 * f + 3);
+      holed.corners.insert(holed.corners.end(), intact.corners.begin() + 3 * f,
+                           intact.corners.begin() + 3 * f + 3);
   ASSERT_EQ(intact.facetCount() - holed.facetCount(), 146u);
 
   const auto planes = layersOver(intact, 40);
@@ -140,7 +143,8 @@ TEST(DefectRepair, MasksWithOnePercentOfFacetsDeletedAgreeWithIntactModel) {
   ASSERT_GT(lit, 10000u);
   const double fraction = static_cast<double>(differing) / static_cast<double>(lit);
   std::printf("[ info ] 1 %% facets deleted: %llu of %llu lit pixels differ (%.4f %%)\n",
-              static_cast<unsigned long long>(differing), static_cast<unsigned long long>(lit), 100 * fraction);
+              static_cast<unsigned long long>(differing), static_cast<unsigned long long>(lit),
+              100 * fraction);
   EXPECT_LT(fraction, 0.005);
 }
 

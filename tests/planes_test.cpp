@@ -77,8 +77,10 @@ TEST(LayerRanges, SweepMatchesBruteForce) {
   const FacetLayers layers = computeFacetLayers(soup.corners, planes);
   ActiveFacets sweep;
   for (uint32_t k = 0; k < planes.size(); ++k) {
-    if (k == 0) sweep.start(layers, 0);
-    else sweep.advance(layers);
+    if (k == 0)
+      sweep.start(layers, 0);
+    else
+      sweep.advance(layers);
     std::vector<uint32_t> expected;
     for (uint32_t f = 0; f < soup.facetCount(); ++f) {
       const float a = soup.corners[3 * f].z, b = soup.corners[3 * f + 1].z, c = soup.corners[3 * f + 2].z;

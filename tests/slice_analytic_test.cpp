@@ -12,7 +12,8 @@
 namespace toposlice {
 namespace {
 
-const SliceMethod kMethods[] = {SliceMethod::ClosestPoint, SliceMethod::SelfReuseLazy, SliceMethod::SelfReuse};
+const SliceMethod kMethods[] = {SliceMethod::ClosestPoint, SliceMethod::SelfReuseLazy,
+                                SliceMethod::SelfReuse};
 
 std::vector<double> uniformPlanes(double zmin, double zmax, double h) {
   PlaneSpec spec;
@@ -27,12 +28,15 @@ std::vector<LayerContours> sliceAllMethods(const FacetSoup& soup, const std::vec
   for (const SliceMethod method : kMethods) {
     const auto layers = fixtures::sliceToVector(soup, planes, method);
     for (std::size_t k = 0; k < layers.size(); ++k) {
-      for (const uint8_t closed : layers[k].loopClosed) EXPECT_EQ(closed, 1) << sliceMethodName(method) << " layer " << k;
+      for (const uint8_t closed : layers[k].loopClosed)
+        EXPECT_EQ(closed, 1) << sliceMethodName(method) << " layer " << k;
       EXPECT_NEAR(layerSignedArea(layers[k]), fixtures::facetwiseArea(soup.corners, planes[k]), 1e-9)
           << sliceMethodName(method) << " layer " << k;
     }
-    if (reference.empty()) reference = layers;
-    else EXPECT_TRUE(layers == reference) << sliceMethodName(method) << " differs from cp";
+    if (reference.empty())
+      reference = layers;
+    else
+      EXPECT_TRUE(layers == reference) << sliceMethodName(method) << " differs from cp";
   }
   return reference;
 }

@@ -20,21 +20,36 @@ struct ClosedModel {
 };
 
 const ClosedModel kClosedModels[] = {
-    {"dental_teeth_upper_case0.stl", false, false}, {"dental_teeth_lower_case0.stl", false, false},
-    {"dental_teeth_upper_case1.stl", false, false}, {"dental_teeth_lower_case1.stl", false, false},
-    {"spine_lumbar_L2-L5_ssm_mean.stl.gz", false, false}, {"knee_femur_ssm_S001.stl", true, false},
-    {"knee_femur_ssm_S002.stl", true, false},      {"knee_femur_ssm_S003.stl", true, false},
-    {"knee_femur_ssm_mean.stl", true, false},      {"knee_tibia_ssm_S001.stl", true, false},
-    {"knee_tibia_ssm_S002.stl", true, false},      {"human_body_smpl_male.stl", false, false},
-    {"human_body_smpl_female.stl", false, false},  {"hand_smpl_closed.stl", true, false},
-    {"skull.stl", true, false},                    {"head_with_pinnae_mesh2hrtf.stl", true, false},
-    {"bunny_closed.stl", true, false},             {"armadillo.stl", true, false},
-    {"igea.stl.gz", true, false},                  {"nefertiti.stl", true, false},
-    {"horse_cyberware.stl", false, true},          {"elephant_refined.stl", true, false},
-    {"amo_statue.stl.gz", true, false},            {"gearwheel_ascii.stl", true, false},
-    {"derived/aligner_upper_case0.stl.gz", false, false}, {"derived/aligner_upper_case0_stage2.stl.gz", false, false},
-    {"derived/spine_L2-L5_sub1.stl.gz", false, false},    {"derived/spine_L2-L5_sub1_bent.stl.gz", false, false},
-    {"derived/femur_S001_sub2.stl.gz", true, false},      {"derived/femur_S002_sub2.stl.gz", true, false},
+    {"dental_teeth_upper_case0.stl", false, false},
+    {"dental_teeth_lower_case0.stl", false, false},
+    {"dental_teeth_upper_case1.stl", false, false},
+    {"dental_teeth_lower_case1.stl", false, false},
+    {"spine_lumbar_L2-L5_ssm_mean.stl.gz", false, false},
+    {"knee_femur_ssm_S001.stl", true, false},
+    {"knee_femur_ssm_S002.stl", true, false},
+    {"knee_femur_ssm_S003.stl", true, false},
+    {"knee_femur_ssm_mean.stl", true, false},
+    {"knee_tibia_ssm_S001.stl", true, false},
+    {"knee_tibia_ssm_S002.stl", true, false},
+    {"human_body_smpl_male.stl", false, false},
+    {"human_body_smpl_female.stl", false, false},
+    {"hand_smpl_closed.stl", true, false},
+    {"skull.stl", true, false},
+    {"head_with_pinnae_mesh2hrtf.stl", true, false},
+    {"bunny_closed.stl", true, false},
+    {"armadillo.stl", true, false},
+    {"igea.stl.gz", true, false},
+    {"nefertiti.stl", true, false},
+    {"horse_cyberware.stl", false, true},
+    {"elephant_refined.stl", true, false},
+    {"amo_statue.stl.gz", true, false},
+    {"gearwheel_ascii.stl", true, false},
+    {"derived/aligner_upper_case0.stl.gz", false, false},
+    {"derived/aligner_upper_case0_stage2.stl.gz", false, false},
+    {"derived/spine_L2-L5_sub1.stl.gz", false, false},
+    {"derived/spine_L2-L5_sub1_bent.stl.gz", false, false},
+    {"derived/femur_S001_sub2.stl.gz", true, false},
+    {"derived/femur_S002_sub2.stl.gz", true, false},
 };
 
 // Crossing-number test: is p inside the closed polygon?
@@ -61,7 +76,8 @@ TEST_P(SliceModels, AllMethodsAgreeAndLoopsAreValid) {
   const double scale = (double{box.max.x} - box.min.x) * (double{box.max.y} - box.min.y);
 
   std::vector<LayerContours> reference;
-  for (const SliceMethod method : {SliceMethod::SelfReuse, SliceMethod::SelfReuseLazy, SliceMethod::ClosestPoint}) {
+  for (const SliceMethod method :
+       {SliceMethod::SelfReuse, SliceMethod::SelfReuseLazy, SliceMethod::ClosestPoint}) {
     SliceStats stats;
     const auto layers = fixtures::sliceToVector(soup, planes, method, 0, &stats);
     EXPECT_EQ(stats.openPolylines, 0u) << sliceMethodName(method);
@@ -87,7 +103,8 @@ TEST_P(SliceModels, AllMethodsAgreeAndLoopsAreValid) {
     const LayerContours& layer = reference[k];
     for (const uint8_t closed : layer.loopClosed) ASSERT_EQ(closed, 1);
     const double area = layerSignedArea(layer);
-    EXPECT_NEAR(area, fixtures::facetwiseArea(soup.corners, planes[k]), 1e-9 * scale + 1e-12) << "layer " << k;
+    EXPECT_NEAR(area, fixtures::facetwiseArea(soup.corners, planes[k]), 1e-9 * scale + 1e-12)
+        << "layer " << k;
     totalArea += area;
     if (!model.nestingCheck) continue;
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {

@@ -12,16 +12,16 @@
 
 #include "core/contours.h"
 #include "io/errors.h"
-#include "tests/fixtures/scratch_dir.h"
 #include "io/svg_writer.h"
+#include "tests/fixtures/scratch_dir.h"
 
 namespace toposlice {
 namespace {
 
 namespace fs = std::filesystem;
 
-using fixtures::ScratchDir;
 using fixtures::readFile;
+using fixtures::ScratchDir;
 
 std::size_t countOf(const std::string& text, const std::string& what) {
   std::size_t n = 0;

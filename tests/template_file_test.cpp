@@ -17,8 +17,8 @@
 
 #include "core/adjacency.h"
 #include "core/weld.h"
-#include "io/stl_reader.h"
 #include "io/errors.h"
+#include "io/stl_reader.h"
 
 namespace toposlice {
 namespace {
@@ -26,7 +26,9 @@ namespace {
 namespace fs = std::filesystem;
 
 // The shared meshes through the project's STL reader (io/stl_reader.h).
-FacetSoup loadBinaryStl(const fs::path& path) { return readStl(path); }
+FacetSoup loadBinaryStl(const fs::path& path) {
+  return readStl(path);
+}
 
 fs::path model(const char* name) {
   return fs::path(TOPOSLICE_MODELS_DIR) / name;

@@ -20,16 +20,16 @@
 #include "Model/COM/NMR_DLLInterfaces.h"
 #include "core/contours.h"
 #include "io/errors.h"
-#include "tests/fixtures/scratch_dir.h"
 #include "io/threemf_writer.h"
+#include "tests/fixtures/scratch_dir.h"
 
 namespace toposlice {
 namespace {
 
 namespace fs = std::filesystem;
 
-using fixtures::ScratchDir;
 using fixtures::readFile;
+using fixtures::ScratchDir;
 
 // ---- fixtures -------------------------------------------------------------------------------------
 

@@ -24,7 +24,9 @@ namespace {
 namespace fs = std::filesystem;
 
 // The shared meshes through the project's STL reader (io/stl_reader.h).
-FacetSoup loadBinaryStl(const fs::path& path) { return readStl(path); }
+FacetSoup loadBinaryStl(const fs::path& path) {
+  return readStl(path);
+}
 
 FacetSoup load(const char* name) {
   return loadBinaryStl(fs::path(TOPOSLICE_MODELS_DIR) / name);

@@ -19,7 +19,8 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     t.table = buildTemplateTable(weldCorners(readStl(job.templateModel).corners));
     t.source = "built from " + job.templateModel.string();
     if (save && !job.templateFile.empty()) {
-      if (!job.templateFile.parent_path().empty()) std::filesystem::create_directories(job.templateFile.parent_path());
+      if (!job.templateFile.parent_path().empty())
+        std::filesystem::create_directories(job.templateFile.parent_path());
       writeTemplateFile(job.templateFile, t.table, false);
       t.source += ", saved to " + job.templateFile.string();
     }
@@ -40,10 +41,12 @@ std::vector<std::filesystem::path> batchVariantOutputs(const BatchVariant& varia
 bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
   const auto outputs = batchVariantOutputs(variant);
   if (outputs.empty() || job.overwrite) return false;
-  return std::all_of(outputs.begin(), outputs.end(), [](const auto& p) { return std::filesystem::exists(p); });
+  return std::all_of(outputs.begin(), outputs.end(),
+                     [](const auto& p) { return std::filesystem::exists(p); });
 }
 
-SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant, const TemplateTable& table) {
+SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,
+                                  const TemplateTable& table) {
   SliceJobOptions o;
   o.planes.layerHeight = job.layerHeight;
   o.planes.layers = job.layers;
@@ -130,7 +133,8 @@ uint64_t batchVariantBytes(const BatchVariant& variant) {
 std::vector<std::size_t> largestFirst(const BatchJob& job, std::vector<std::size_t> indices) {
   std::vector<uint64_t> bytes(job.variants.size(), 0);
   for (const std::size_t i : indices) bytes[i] = batchVariantBytes(job.variants[i]);
-  std::stable_sort(indices.begin(), indices.end(), [&](std::size_t a, std::size_t b) { return bytes[a] > bytes[b]; });
+  std::stable_sort(indices.begin(), indices.end(),
+                   [&](std::size_t a, std::size_t b) { return bytes[a] > bytes[b]; });
   return indices;
 }
 
@@ -156,15 +160,16 @@ void printBatchSummary(std::FILE* out, const BatchJob& job, const BatchTemplate&
     const BatchOutcome& o = outcomes[i];
     if (withRank) {
       const std::string rank = o.rank >= 0 ? std::to_string(o.rank) : "-";
-      std::fprintf(out, "%-10s : %-8s %7.2f s  rank %-3s %s\n", job.variants[i].name.c_str(), o.status.c_str(),
-                   o.seconds, rank.c_str(), o.detail.c_str());
+      std::fprintf(out, "%-10s : %-8s %7.2f s  rank %-3s %s\n", job.variants[i].name.c_str(),
+                   o.status.c_str(), o.seconds, rank.c_str(), o.detail.c_str());
     } else {
-      std::fprintf(out, "%-10s : %-8s %7.2f s  %s\n", job.variants[i].name.c_str(), o.status.c_str(), o.seconds,
-                   o.detail.c_str());
+      std::fprintf(out, "%-10s : %-8s %7.2f s  %s\n", job.variants[i].name.c_str(), o.status.c_str(),
+                   o.seconds, o.detail.c_str());
     }
   }
-  std::fprintf(out, "summary    : %zu sliced, %zu already complete, %zu failed of %zu; %llu layers in %.2f s", t.sliced,
-               t.complete, t.failed, outcomes.size(), static_cast<unsigned long long>(t.layers), totalSeconds);
+  std::fprintf(out, "summary    : %zu sliced, %zu already complete, %zu failed of %zu; %llu layers in %.2f s",
+               t.sliced, t.complete, t.failed, outcomes.size(), static_cast<unsigned long long>(t.layers),
+               totalSeconds);
   if (t.sliced > 0 && totalSeconds > 0)
     std::fprintf(out, " (%.1f variants/min)", 60.0 * static_cast<double>(t.sliced) / totalSeconds);
   std::fprintf(out, "%s\n", totalsSuffix.c_str());

@@ -41,7 +41,8 @@ bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant);
 // The runSliceJob options for one variant: the job's planes (default layer height 0.05 mm when none is
 // given), method, join tolerance, overwrite, mask settings, features and report, with `table` as the
 // template. Throws InputError for an unknown method.
-SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant, const TemplateTable& table);
+SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,
+                                  const TemplateTable& table);
 
 // What happened to one variant.
 struct BatchOutcome {

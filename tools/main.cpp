@@ -69,7 +69,8 @@ struct PlaneOptions {
 
 void addPlaneOptions(CLI::App* app, PlaneOptions& p) {
   p.heightOpt = app->add_option("--layer-height,-H", p.layerHeight, "Layer height in mm (default 0.05)");
-  p.layersOpt = app->add_option("--layers", p.layers, "Number of layers (with no height: divide the model height)");
+  p.layersOpt =
+      app->add_option("--layers", p.layers, "Number of layers (with no height: divide the model height)");
   p.z0Opt = app->add_option("--z0", p.z0, "Bottom of layer 0 in mm (default: the model's lowest z)");
   app->add_option("--z", p.zList, "Explicit plane heights in mm, comma separated, ascending")
       ->excludes(p.heightOpt)
@@ -80,7 +81,8 @@ void addPlaneOptions(CLI::App* app, PlaneOptions& p) {
 PlaneSpec planeSpec(const PlaneOptions& p) {
   PlaneSpec spec;
   if (!p.zList.empty()) {
-    if (!parseZList(p.zList, spec.explicitZ)) throw InputError("--z '" + p.zList + "': not a list of numbers");
+    if (!parseZList(p.zList, spec.explicitZ))
+      throw InputError("--z '" + p.zList + "': not a list of numbers");
     return spec;
   }
   if (*p.heightOpt) spec.layerHeight = p.layerHeight;
@@ -91,9 +93,9 @@ PlaneSpec planeSpec(const PlaneOptions& p) {
 }
 
 void printBox(const BoundingBox& b) {
-  std::printf("bounding box   : [%.6g, %.6g] x [%.6g, %.6g] x [%.6g, %.6g] (size %.6g x %.6g x %.6g)\n", b.min.x,
-              b.max.x, b.min.y, b.max.y, b.min.z, b.max.z, double{b.max.x} - b.min.x, double{b.max.y} - b.min.y,
-              double{b.max.z} - b.min.z);
+  std::printf("bounding box   : [%.6g, %.6g] x [%.6g, %.6g] x [%.6g, %.6g] (size %.6g x %.6g x %.6g)\n",
+              b.min.x, b.max.x, b.min.y, b.max.y, b.min.z, b.max.z, double{b.max.x} - b.min.x,
+              double{b.max.y} - b.min.y, double{b.max.z} - b.min.z);
 }
 
 int runInfo(const std::string& model) {
@@ -122,7 +124,8 @@ int runInfo(const std::string& model) {
               static_cast<unsigned long long>(edges.degenerateFacets));
   const bool closed =
       edges.boundary == 0 && edges.nonManifold == 0 && edges.inconsistent == 0 && edges.degenerateFacets == 0;
-  std::printf("closed         : %s\n", closed ? "yes (every edge has exactly two facets, consistently oriented)" : "no");
+  std::printf("closed         : %s\n",
+              closed ? "yes (every edge has exactly two facets, consistently oriented)" : "no");
   return 0;
 }
 
@@ -131,27 +134,31 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
   std::printf("method     : %s; topology %s\n", sliceMethodName(options.slice.method), r.topology.c_str());
   if (r.edges.boundary + r.edges.nonManifold + r.edges.inconsistent > 0)
     std::printf("defects    : %llu boundary, %llu non-manifold, %llu inconsistent edges\n",
-                static_cast<unsigned long long>(r.edges.boundary), static_cast<unsigned long long>(r.edges.nonManifold),
+                static_cast<unsigned long long>(r.edges.boundary),
+                static_cast<unsigned long long>(r.edges.nonManifold),
                 static_cast<unsigned long long>(r.edges.inconsistent));
   // Every repair, per kind, so nothing is changed silently.
-  std::printf("repairs    : %llu degenerate facets skipped; %llu gaps bridged (<= %g mm) closing %llu loops, "
-              "%llu wider gaps closed, %llu polylines left open; orientation %s\n",
-              static_cast<unsigned long long>(r.degenerateFacets), static_cast<unsigned long long>(r.stats.gaps.joins),
-              options.slice.closeGaps, static_cast<unsigned long long>(r.stats.gaps.closedLoops),
-              static_cast<unsigned long long>(r.stats.gaps.selfClosed),
-              static_cast<unsigned long long>(r.stats.openPolylines),
-              r.flipped ? "flipped (the mesh was inside out)"
-                        : (r.inverted ? "INSIDE OUT (negative volume; use --fix-orientation)" : "ok"));
-  std::printf("layers     : %llu, %llu segments, %llu loops, %llu open polylines\n",
-              static_cast<unsigned long long>(r.stats.layers), static_cast<unsigned long long>(r.stats.segments),
-              static_cast<unsigned long long>(r.stats.loops), static_cast<unsigned long long>(r.stats.openPolylines));
+  std::printf(
+      "repairs    : %llu degenerate facets skipped; %llu gaps bridged (<= %g mm) closing %llu loops, "
+      "%llu wider gaps closed, %llu polylines left open; orientation %s\n",
+      static_cast<unsigned long long>(r.degenerateFacets),
+      static_cast<unsigned long long>(r.stats.gaps.joins), options.slice.closeGaps,
+      static_cast<unsigned long long>(r.stats.gaps.closedLoops),
+      static_cast<unsigned long long>(r.stats.gaps.selfClosed),
+      static_cast<unsigned long long>(r.stats.openPolylines),
+      r.flipped ? "flipped (the mesh was inside out)"
+                : (r.inverted ? "INSIDE OUT (negative volume; use --fix-orientation)" : "ok"));
+  std::printf(
+      "layers     : %llu, %llu segments, %llu loops, %llu open polylines\n",
+      static_cast<unsigned long long>(r.stats.layers), static_cast<unsigned long long>(r.stats.segments),
+      static_cast<unsigned long long>(r.stats.loops), static_cast<unsigned long long>(r.stats.openPolylines));
   if (options.slice.method == SliceMethod::SelfReuseLazy)
     std::printf("table      : %llu joins on %llu layers, %llu ends left open\n",
                 static_cast<unsigned long long>(r.stats.lazy.joins),
                 static_cast<unsigned long long>(r.stats.lazy.joinedLayers),
                 static_cast<unsigned long long>(r.stats.lazy.unjoined));
-  std::printf("time       : read %.3f s, weld+adjacency %.3f s, slice%s %.3f s, total %.3f s\n", r.readSeconds,
-              r.topologySeconds, r.written.empty() ? "" : "+write", r.sliceSeconds,
+  std::printf("time       : read %.3f s, weld+adjacency %.3f s, slice%s %.3f s, total %.3f s\n",
+              r.readSeconds, r.topologySeconds, r.written.empty() ? "" : "+write", r.sliceSeconds,
               r.readSeconds + r.topologySeconds + r.sliceSeconds);
   if (!options.masks.output.empty() || !options.report.empty())
     std::printf("resin      : %.4f ml\n", r.volumeMl);
@@ -176,26 +183,30 @@ int runTemplate(const std::string& model, const std::string& output, bool force,
   const TemplateTable table = buildTemplateTable(mesh);
   writeTemplateFile(output, table, force);
   if (!quiet) {
-    const uint64_t missing = static_cast<uint64_t>(std::count(table.adjacency.begin(), table.adjacency.end(), -1));
-    std::printf("template   : %s, %u facets, %u vertices, fingerprint %016llx\n", model.c_str(), table.facetCount,
-                table.vertexCount, static_cast<unsigned long long>(table.fingerprint));
-    std::printf("table      : %llu of %zu entries without a neighbour\n", static_cast<unsigned long long>(missing),
-                table.adjacency.size());
-    std::printf("time       : %.3f s\n", std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    const uint64_t missing =
+        static_cast<uint64_t>(std::count(table.adjacency.begin(), table.adjacency.end(), -1));
+    std::printf("template   : %s, %u facets, %u vertices, fingerprint %016llx\n", model.c_str(),
+                table.facetCount, table.vertexCount, static_cast<unsigned long long>(table.fingerprint));
+    std::printf("table      : %llu of %zu entries without a neighbour\n",
+                static_cast<unsigned long long>(missing), table.adjacency.size());
+    std::printf("time       : %.3f s\n",
+                std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
     std::printf("wrote      : %s\n", output.c_str());
   }
   return 0;
 }
 
 int run(int argc, char** argv) {
-  CLI::App app{"toposlice: fast slicing for mask-projection 3D printing, reusing topology across layers and models"};
+  CLI::App app{
+      "toposlice: fast slicing for mask-projection 3D printing, reusing topology across layers and models"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "toposlice 0.1.0");
 
   CommonOptions common;
   std::string model;
 
-  CLI::App* info = app.add_subcommand("info", "Print facets, vertices, bounds, volume, shells and edge defects");
+  CLI::App* info =
+      app.add_subcommand("info", "Print facets, vertices, bounds, volume, shells and edge defects");
   info->add_option("model", model, "STL file (binary or ASCII, optionally .gz)")->required();
 
   CLI::App* slice = app.add_subcommand("slice", "Slice a model into per-layer contours");
@@ -206,17 +217,24 @@ int run(int argc, char** argv) {
   std::string method = "sr";
   std::vector<std::string> outputs;
   std::string templatePath, onMismatch = "fail";
-  slice->add_option("-o,--output", outputs, "Contour output, by extension: .cli (Common Layer Interface), .svg");
+  slice->add_option("-o,--output", outputs,
+                    "Contour output, by extension: .cli (Common Layer Interface), .svg");
   slice->add_option("--method", method, "cp (closest point), sr-lazy (paper's self reuse), sr (default)")
       ->check(CLI::IsMember({"cp", "sr-lazy", "sr"}));
   slice->add_flag("--cli-binary", options.cliBinary, "Write binary CLI instead of ASCII");
-  slice->add_option("--svg-layers", options.svgLayers, "Layers for .svg output: e.g. 0,10,20-30,mid,last (default mid)");
-  slice->add_option("--template", templatePath, "Template table (.topo) of a model with the same connectivity");
-  slice->add_option("--on-mismatch", onMismatch, "When the model does not match the template: fail or rebuild")
+  slice->add_option("--svg-layers", options.svgLayers,
+                    "Layers for .svg output: e.g. 0,10,20-30,mid,last (default mid)");
+  slice->add_option("--template", templatePath,
+                    "Template table (.topo) of a model with the same connectivity");
+  slice
+      ->add_option("--on-mismatch", onMismatch, "When the model does not match the template: fail or rebuild")
       ->check(CLI::IsMember({"fail", "rebuild"}));
-  slice->add_option("--band-layers", options.slice.bandLayers, "Layers per parallel band (default: automatic)");
+  slice->add_option("--band-layers", options.slice.bandLayers,
+                    "Layers per parallel band (default: automatic)");
   std::string candidates = "sweep";
-  slice->add_option("--candidates", candidates, "How bands find their first layer's facets: sweep (default) or embree")
+  slice
+      ->add_option("--candidates", candidates,
+                   "How bands find their first layer's facets: sweep (default) or embree")
       ->check(CLI::IsMember({"sweep", "embree"}));
   slice->add_option("--join-tolerance", options.slice.joinTolerance,
                     "mm; cp and sr-lazy join segment ends this close (default 1e-5)");
@@ -227,25 +245,29 @@ int run(int argc, char** argv) {
   slice->add_option("--printer", options.masks.printer, "Printer preset: " + printerNames());
   slice->add_option("--pixel", options.masks.pixel, "Pixel size in mm (overrides the preset)");
   slice->add_option("--resolution", resolution, "Image size WxH in pixels (overrides the preset)");
-  slice->add_option("--origin", origin, "X,Y of pixel (0,0)'s lower-left corner in mm (default: model centred)");
+  slice->add_option("--origin", origin,
+                    "X,Y of pixel (0,0)'s lower-left corner in mm (default: model centred)");
   slice->add_flag("--mirror-x", options.masks.mirrorX, "Mirror the masks in x");
   slice->add_flag("--mirror-y", options.masks.mirrorY, "Mirror the masks in y");
   slice->add_flag("--antialias", options.masks.antialias, "Anti-aliased masks (covered fraction, 8-bit)");
   slice->add_flag("--crop", options.masks.crop, "Allow a model larger than the image (cut off at its edges)");
   std::vector<std::string> addFeatures, removeFeatures;
   slice->add_option("--add", addFeatures, "Add-on feature mesh, sliced on its own (repeatable)");
-  slice->add_option("--remove", removeFeatures, "Removal feature mesh, subtracted at the winding stage (repeatable)");
+  slice->add_option("--remove", removeFeatures,
+                    "Removal feature mesh, subtracted at the winding stage (repeatable)");
   std::string reportPath;
   slice->add_option("--report", reportPath, "Per-layer CSV report: z, area, loops, islands; resin volume");
   slice->add_option("--close-gaps", options.slice.closeGaps,
                     "mm; bridge open contour ends of defective meshes up to this gap (default 0.05, 0: off)");
   bool keepOpen = false;
-  slice->add_flag("--keep-open", keepOpen,
-                  "Leave polylines open that no gap within --close-gaps closes (default: close the wider gaps too)");
+  slice->add_flag(
+      "--keep-open", keepOpen,
+      "Leave polylines open that no gap within --close-gaps closes (default: close the wider gaps too)");
   slice->add_flag("--fix-orientation", options.fixOrientation, "Flip an inside-out mesh (negative volume)");
   slice->add_flag("-f,--force", options.overwrite, "Overwrite existing outputs");
 
-  CLI::App* templ = app.add_subcommand("template", "Save a template's adjacency table for its customized variants");
+  CLI::App* templ =
+      app.add_subcommand("template", "Save a template's adjacency table for its customized variants");
   std::string templateOut;
   bool templateForce = false;
   templ->add_option("model", model, "Template STL")->required();
@@ -323,4 +345,6 @@ int run(int argc, char** argv) {
 }  // namespace
 }  // namespace toposlice
 
-int main(int argc, char** argv) { return toposlice::run(argc, argv); }
+int main(int argc, char** argv) {
+  return toposlice::run(argc, argv);
+}

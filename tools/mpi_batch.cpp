@@ -308,7 +308,8 @@ int runDispatcher(const Options& options, int size, int provided) {
       --remoteActive;
       continue;
     }
-    if (h.kind == static_cast<int32_t>(Kind::Result) && h.index >= 0 && static_cast<std::size_t>(h.index) < n) {
+    if (h.kind == static_cast<int32_t>(Kind::Result) && h.index >= 0 &&
+        static_cast<std::size_t>(h.index) < n) {
       BatchOutcome o;
       o.status = h.failed ? "failed" : "ok";
       o.detail = std::move(detail);
@@ -365,7 +366,8 @@ int run(int argc, char** argv) {
   batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
   batch->add_option("--threads", options.threads, "Worker threads per rank (default: all cores)");
   batch->add_flag("-q,--quiet", options.quiet, "No progress lines or summary, errors only");
-  batch->add_flag("--dispatch-only", options.dispatchOnly, "Rank 0 hands out variants but slices none (with -np > 1)");
+  batch->add_flag("--dispatch-only", options.dispatchOnly,
+                  "Rank 0 hands out variants but slices none (with -np > 1)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -408,4 +410,6 @@ int run(int argc, char** argv) {
 }  // namespace
 }  // namespace toposlice
 
-int main(int argc, char** argv) { return toposlice::run(argc, argv); }
+int main(int argc, char** argv) {
+  return toposlice::run(argc, argv);
+}

@@ -7,8 +7,8 @@
 #include <cstdint>
 #include <filesystem>
 #include <optional>
-#include <utility>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/adjacency.h"
@@ -50,8 +50,8 @@ struct SliceJobOptions {
 struct SliceJobResult {
   uint64_t facets = 0;
   BoundingBox bounds;
-  std::string topology;  // how the adjacency was obtained, for the summary
-  EdgeStats edges;       // when built here
+  std::string topology;           // how the adjacency was obtained, for the summary
+  EdgeStats edges;                // when built here
   uint64_t degenerateFacets = 0;  // skipped
   double volume = 0;              // signed, before any fix
   bool inverted = false, flipped = false;
