@@ -7,6 +7,7 @@
 #include <string_view>
 
 #include "io/output_file.h"
+#include "io/xml_text.h"
 
 namespace toposlice {
 namespace {
@@ -29,27 +30,6 @@ void appendNumber(std::string& out, double v, int decimals) {
   std::string_view s(buf, static_cast<std::size_t>(end - buf));
   if (s == "-0") s = "0";
   out += s;
-}
-
-void appendXmlEscaped(std::string& out, std::string_view text) {
-  for (const char c : text) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += (static_cast<unsigned char>(c) < 0x20) ? ' ' : c;
-    }
-  }
 }
 
 class SvgWriter final : public ContourSink {
@@ -91,7 +71,8 @@ class SvgWriter final : public ContourSink {
     s += ' ';
     appendNumber(s, totalHeight, 4);
     s += "\">\n<title>";
-    appendXmlEscaped(s, job.name);
+    appendXmlEscaped(
+        s, job.name, [](unsigned char c) { return c >= 0x20; }, ' ');  // UTF-8 kept
     s += "</title>\n<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n";
     file_.write(s.data(), s.size());
   }

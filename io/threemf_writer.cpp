@@ -31,6 +31,7 @@
 #include "io/errors.h"
 #include "io/output_file.h"
 #include "io/text_buffer.h"
+#include "io/xml_text.h"
 
 namespace toposlice {
 namespace {
@@ -88,24 +89,8 @@ class Text : public TextBuffer {
 // XML attribute text: printable ASCII, escaped; other bytes become '_'; "part" when empty.
 std::string xmlName(const std::string& name) {
   std::string out;
-  for (const char c : name) {
-    switch (c) {
-      case '&':
-        out += "&amp;";
-        break;
-      case '<':
-        out += "&lt;";
-        break;
-      case '>':
-        out += "&gt;";
-        break;
-      case '"':
-        out += "&quot;";
-        break;
-      default:
-        out += (c >= 0x20 && c < 0x7f) ? c : '_';
-    }
-  }
+  appendXmlEscaped(
+      out, name, [](unsigned char c) { return c >= 0x20 && c < 0x7f; }, '_');
   return out.empty() ? std::string("part") : out;
 }
 
