@@ -147,6 +147,12 @@ void LoopFollower::emitCanonical(LayerContours& out) {
 bool LoopFollower::start(const MarchMesh& mesh, std::span<const uint32_t> active, uint32_t k, double z,
                          LayerContours& out) {
   beginLayer(mesh, k, z);
+  // The walk visits every active record in loop order, which is random in memory: fetching them all
+  // first, in list order, overlaps the cache misses instead of taking them one after another.
+  for (const uint32_t r : active) {
+    prefetch(&mesh.facets[r]);
+    prefetch(&marks_[r]);
+  }
   for (const uint32_t r : active)
     if (marks_[r].generation != generation_ && !traceLoop(mesh, r)) return false;
   emitCanonical(out);

@@ -187,7 +187,7 @@ BandPlan planBands(std::size_t layerCount, const SliceSettings& settings) {
   if (settings.method == SliceMethod::SelfReuseLazy) return {1, 1};
   const std::size_t threads = std::max(1u, ThreadLimit::available());
   uint32_t band = settings.bandLayers;
-  if (band == 0) band = std::clamp<uint32_t>(static_cast<uint32_t>(layerCount / (threads * 8)), 8, 32);
+  if (band == 0) band = std::clamp<uint32_t>(static_cast<uint32_t>(layerCount / (threads * 8)), 8, 16);
   const std::size_t bands = std::max<std::size_t>(1, (layerCount + band - 1) / band);
   return {band, std::min<std::size_t>(bands, 2 * threads)};
 }
