@@ -20,6 +20,7 @@
 #include "io/template_file.h"
 #include "parallel/band_slicer.h"
 #include "parallel/parallel.h"
+#include "parallel/variant_screen.h"
 
 namespace toposlice {
 namespace {
@@ -171,7 +172,7 @@ int main(int argc, char** argv) {
         const FacetSoup soup2 = readStl(dir + m.variant);
         const double read2 = since(t);
         const TemplateTable loaded = readTemplateFile(topo);
-        if (checkVariantConnectivity(soup2.corners, loaded.adjacency)) {
+        if (checkVariantConnectivityParallel(soup2.corners, loaded.adjacency)) {
           std::fprintf(stderr, "%s does not match its template\n", m.variant);
           return 1;
         }

@@ -78,10 +78,11 @@ constexpr std::size_t kPrefetchFacets = 48;
 // Fast screening pass, branch-light: nonzero when some entry may fail. It checks the same rule as
 // firstMismatch but takes the first back entry only, so it may flag a valid pair that names the same
 // neighbour on several edges; firstMismatch then decides.
-uint32_t screen(std::span<const Point3f> corners, std::span<const int32_t> adjacency) {
+uint32_t screen(std::span<const Point3f> corners, std::span<const int32_t> adjacency, std::size_t begin,
+                std::size_t end) {
   const std::size_t t = adjacency.size() / 3;
   uint32_t bad = 0;
-  for (std::size_t i = 0; i < t; ++i) {
+  for (std::size_t i = begin; i < end; ++i) {
     if (i + kPrefetchFacets < t) {
       for (std::size_t e = 3 * (i + kPrefetchFacets); e < 3 * (i + kPrefetchFacets) + 3; ++e) {
         const auto ahead = static_cast<std::size_t>(static_cast<uint32_t>(adjacency[e]));
@@ -157,8 +158,15 @@ std::optional<VariantMismatch> checkVariantConnectivity(std::span<const Point3f>
         ": the variant does not share the template's connectivity";
     return m;
   }
-  if (screen(corners, adjacency) == 0) return std::nullopt;
+  if (screen(corners, adjacency, 0, adjacency.size() / 3) == 0) return std::nullopt;
   return firstMismatch(corners, adjacency);
+}
+
+bool variantMayMismatch(std::span<const Point3f> corners, std::span<const int32_t> adjacency,
+                        std::size_t begin, std::size_t end) {
+  assert(adjacency.size() % 3 == 0 && end <= adjacency.size() / 3);
+  if (corners.size() != adjacency.size()) return true;
+  return screen(corners, adjacency, begin, end) != 0;
 }
 
 }  // namespace toposlice

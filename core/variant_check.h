@@ -38,4 +38,10 @@ struct VariantMismatch {
 std::optional<VariantMismatch> checkVariantConnectivity(std::span<const Point3f> corners,
                                                         std::span<const int32_t> adjacency);
 
+// The fast half of that check for facets [begin, end): false when every pair checked from those facets
+// holds, true when one may fail (or the facet counts differ); then checkVariantConnectivity finds and
+// names the first mismatch. Ranges may be screened in parallel (parallel/variant_screen.h).
+bool variantMayMismatch(std::span<const Point3f> corners, std::span<const int32_t> adjacency,
+                        std::size_t begin, std::size_t end);
+
 }  // namespace toposlice

@@ -17,6 +17,7 @@
 #include "core/weld.h"
 #include "io/stl_reader.h"
 #include "io/template_file.h"
+#include "parallel/variant_screen.h"
 
 namespace toposlice {
 namespace {
@@ -203,6 +204,31 @@ TEST(VariantCheck, AlignerStageAgainstSavedTemplate) {
   const auto bad = checkVariantConnectivity(moved.corners, table.adjacency);
   ASSERT_TRUE(bad.has_value());
   EXPECT_TRUE(bad->facet == 300000 || bad->neighbour == 300000) << bad->reason;
+}
+
+TEST(VariantCheck, ParallelScreeningGivesTheSameAnswer) {
+  // The aligner (545k facets) spans many screening chunks; defects far into the mesh and near its end.
+  const std::vector<int32_t> table = adjacencyOf(load("derived/aligner_upper_case0.stl.gz"));
+  const FacetSoup stage2 = load("derived/aligner_upper_case0_stage2.stl.gz");
+  auto same = [&](const FacetSoup& variant, std::span<const int32_t> t) {
+    const auto serial = checkVariantConnectivity(variant.corners, t);
+    const auto parallel = checkVariantConnectivityParallel(variant.corners, t);
+    ASSERT_EQ(serial.has_value(), parallel.has_value());
+    if (!serial) return;
+    EXPECT_EQ(serial->facet, parallel->facet);
+    EXPECT_EQ(serial->edge, parallel->edge);
+    EXPECT_EQ(serial->neighbour, parallel->neighbour);
+    EXPECT_EQ(serial->reason, parallel->reason);
+  };
+  same(stage2, table);
+  EXPECT_FALSE(checkVariantConnectivityParallel(stage2.corners, table).has_value());
+  for (const std::size_t f : {std::size_t{400000}, stage2.facetCount() - 2}) {
+    FacetSoup moved = stage2;
+    moved.corners[3 * f + 1].y += 0.01f;
+    same(moved, table);
+    EXPECT_TRUE(checkVariantConnectivityParallel(moved.corners, table).has_value()) << f;
+  }
+  same(load("knee_femur_ssm_S001.stl"), table);  // another facet count
 }
 
 }  // namespace

@@ -25,6 +25,7 @@
 #include "io/svg_writer.h"
 #include "io/threemf_writer.h"
 #include "parallel/parallel.h"
+#include "parallel/variant_screen.h"
 
 namespace toposlice {
 namespace {
@@ -79,7 +80,8 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
   if (options.templateTable != nullptr && method != SliceMethod::ClosestPoint) {
     const TemplateTable& table = *options.templateTable;
     // Linear check (core/variant_check.h): facet count, then every adjacent pair shares its edge.
-    const std::optional<VariantMismatch> mismatch = checkVariantConnectivity(soup.corners, table.adjacency);
+    const std::optional<VariantMismatch> mismatch =
+        checkVariantConnectivityParallel(soup.corners, table.adjacency);
     if (!mismatch) {
       result.topology = "loaded from template (connectivity verified)";
       return table.adjacency;
