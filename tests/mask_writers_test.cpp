@@ -40,6 +40,30 @@ MaskImage blankMask(uint32_t width, uint32_t height) {
   return m;
 }
 
+// Rows of runs of random length (1..maxRun) and value (0/255 when levels is 2, else 0..levels-1); a
+// third of the rows copy the row above and, with darkRows, a quarter of the others stay dark. `below(n)`
+// draws from 0..n-1.
+template <class Below>
+MaskImage randomRunMask(uint32_t width, uint32_t height, uint32_t levels, uint32_t maxRun, bool darkRows,
+                        Below& below) {
+  MaskImage m = blankMask(width, height);
+  for (uint32_t j = 0; j < height; ++j) {
+    uint8_t* row = m.pixels.data() + size_t{j} * width;
+    if (j > 0 && below(3) == 0) {
+      std::copy_n(row - width, width, row);
+      continue;
+    }
+    if (darkRows && below(4) == 0) continue;
+    for (uint32_t i = 0; i < width;) {
+      const uint32_t run = std::min(width - i, 1 + below(maxRun));
+      const auto value = static_cast<uint8_t>(levels == 2 ? below(2) * 255 : below(levels));
+      std::fill_n(row + i, run, value);
+      i += run;
+    }
+  }
+  return m;
+}
+
 // A disc of radius r at (cx, cy): binary, or with a soft edge (coverage-like values) when antiAliased.
 MaskImage discMask(uint32_t width, uint32_t height, double cx, double cy, double r, bool antiAliased) {
   MaskImage m = blankMask(width, height);
@@ -195,21 +219,7 @@ TEST(PngEncode, RandomRunImagesRoundTrip) {
   for (uint32_t trial = 0; trial < 200; ++trial) {
     const uint32_t width = 1 + below(700), height = 1 + below(40);
     const uint32_t levels = trial % 3 == 0 ? 2 : 1 + below(256);
-    MaskImage m = blankMask(width, height);
-    for (uint32_t j = 0; j < height; ++j) {
-      uint8_t* row = m.pixels.data() + size_t{j} * width;
-      if (j > 0 && below(3) == 0) {
-        std::copy_n(row - width, width, row);
-        continue;
-      }
-      for (uint32_t i = 0; i < width;) {
-        const uint32_t run = std::min(width - i, 1 + below(600));
-        const auto value = static_cast<uint8_t>(levels == 2 ? below(2) * 255 : below(levels));
-        std::fill_n(row + i, run, value);
-        i += run;
-      }
-    }
-    expectPngRoundTrip(m);
+    expectPngRoundTrip(randomRunMask(width, height, levels, 600, false, below));
     if (HasFailure()) break;
   }
 }
@@ -519,21 +529,7 @@ TEST(PngEncode, ZlibInflatesRandomRunImages) {
     const uint32_t width = 1 + below(trial % 5 == 0 ? 3 : 900), height = 1 + below(60);
     const uint32_t levels = trial % 3 == 0 ? 2 : 1 + below(256);
     const uint32_t maxRun = 1 + below(trial % 2 ? 8 : 700);
-    MaskImage m = blankMask(width, height);
-    for (uint32_t j = 0; j < height; ++j) {
-      uint8_t* row = m.pixels.data() + size_t{j} * width;
-      if (j > 0 && below(3) == 0) {
-        std::copy_n(row - width, width, row);
-        continue;
-      }
-      if (below(4) == 0) continue;  // dark row
-      for (uint32_t i = 0; i < width;) {
-        const uint32_t run = std::min(width - i, 1 + below(maxRun));
-        const auto value = static_cast<uint8_t>(levels == 2 ? below(2) * 255 : below(levels));
-        std::fill_n(row + i, run, value);
-        i += run;
-      }
-    }
+    const MaskImage m = randomRunMask(width, height, levels, maxRun, true, below);
     const MaskImage& mask = trial % 2 ? m : withExtents(m);
     const MaskPngCode code = trial % 4 == 3 ? MaskPngCode::fixed : MaskPngCode::smallest;
     ASSERT_NE(expectInflatesExactly(mask, code), -1) << "trial " << trial << ", " << width << "x" << height;
