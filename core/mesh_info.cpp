@@ -18,9 +18,11 @@ BoundingBox boundsOf(std::span<const Point3f> points) {
   return box;
 }
 
-double signedVolumeTerms(std::span<const Point3f> corners, const double centre[3], std::size_t beginFacet,
+double signedVolumeTerms(std::span<const Point3f> corners, const BoundingBox& bounds, std::size_t beginFacet,
                          std::size_t endFacet) {
-  const double cx = centre[0], cy = centre[1], cz = centre[2];
+  const double cx = 0.5 * (double{bounds.min.x} + bounds.max.x),
+               cy = 0.5 * (double{bounds.min.y} + bounds.max.y),
+               cz = 0.5 * (double{bounds.min.z} + bounds.max.z);
   double sum = 0;
   for (std::size_t c = 3 * beginFacet; c < 3 * endFacet; c += 3) {
     const double ax = corners[c].x - cx, ay = corners[c].y - cy, az = corners[c].z - cz;
@@ -32,10 +34,7 @@ double signedVolumeTerms(std::span<const Point3f> corners, const double centre[3
 }
 
 double signedVolume(std::span<const Point3f> corners) {
-  const BoundingBox box = boundsOf(corners);
-  const double centre[3] = {0.5 * (double{box.min.x} + box.max.x), 0.5 * (double{box.min.y} + box.max.y),
-                            0.5 * (double{box.min.z} + box.max.z)};
-  return signedVolumeTerms(corners, centre, 0, corners.size() / 3) / 6.0;
+  return signedVolumeTerms(corners, boundsOf(corners), 0, corners.size() / 3) / 6.0;
 }
 
 double surfaceArea(std::span<const Point3f> corners) {

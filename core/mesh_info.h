@@ -24,9 +24,10 @@ BoundingBox boundsOf(std::span<const Point3f> points);
 // Signed volume of the soup (divergence theorem, tetrahedra against the bounding-box centre), in double.
 double signedVolume(std::span<const Point3f> corners);
 
-// Six times the signed volume of facets [beginFacet, endFacet) against `centre`: the terms of
-// signedVolume, for callers that sum fixed blocks in parallel (and add them in block order).
-double signedVolumeTerms(std::span<const Point3f> corners, const double centre[3], std::size_t beginFacet,
+// Six times the signed volume of facets [beginFacet, endFacet) against the centre of `bounds` (the whole
+// soup's): the terms of signedVolume, for callers that sum fixed blocks in parallel (and add them in
+// block order).
+double signedVolumeTerms(std::span<const Point3f> corners, const BoundingBox& bounds, std::size_t beginFacet,
                          std::size_t endFacet);
 
 double surfaceArea(std::span<const Point3f> corners);

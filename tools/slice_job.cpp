@@ -158,32 +158,24 @@ struct SoupMeasures {
 static SoupMeasures measureSoup(std::span<const Point3f> corners) {
   constexpr std::size_t kBlock = 32768;  // facets
   const std::size_t facets = corners.size() / 3, blocks = (facets + kBlock - 1) / kBlock;
-  std::vector<BoundingBox> boxes(blocks);
+  std::vector<Point3f> extremes(2 * blocks);  // each block's bounding-box corners
   std::vector<uint64_t> degenerate(blocks, 0);
   std::vector<double> terms(blocks, 0.0);
   auto blockEnd = [&](std::size_t b) { return std::min(facets, (b + 1) * kBlock); };
   parallelForChunks(blocks, 1, [&](std::size_t b0, std::size_t b1) {
     for (std::size_t b = b0; b < b1; ++b) {
-      boxes[b] = boundsOf(corners.subspan(3 * b * kBlock, 3 * (blockEnd(b) - b * kBlock)));
+      const BoundingBox box = boundsOf(corners.subspan(3 * b * kBlock, 3 * (blockEnd(b) - b * kBlock)));
+      extremes[2 * b] = box.min;
+      extremes[2 * b + 1] = box.max;
       for (std::size_t f = b * kBlock; f < blockEnd(b); ++f)
         degenerate[b] += isDegenerateFacet(&corners[3 * f]);
     }
   });
   SoupMeasures m;
-  if (blocks == 0) return m;
-  m.bounds = boxes[0];
-  for (const BoundingBox& box : boxes) {
-    m.bounds.min = {std::min(m.bounds.min.x, box.min.x), std::min(m.bounds.min.y, box.min.y),
-                    std::min(m.bounds.min.z, box.min.z)};
-    m.bounds.max = {std::max(m.bounds.max.x, box.max.x), std::max(m.bounds.max.y, box.max.y),
-                    std::max(m.bounds.max.z, box.max.z)};
-  }
-  const double centre[3] = {0.5 * (double{m.bounds.min.x} + m.bounds.max.x),
-                            0.5 * (double{m.bounds.min.y} + m.bounds.max.y),
-                            0.5 * (double{m.bounds.min.z} + m.bounds.max.z)};
+  m.bounds = boundsOf(extremes);
   parallelForChunks(blocks, 1, [&](std::size_t b0, std::size_t b1) {
     for (std::size_t b = b0; b < b1; ++b)
-      terms[b] = signedVolumeTerms(corners, centre, b * kBlock, blockEnd(b));
+      terms[b] = signedVolumeTerms(corners, m.bounds, b * kBlock, blockEnd(b));
   });
   double sum = 0;
   for (const double t : terms) sum += t;
