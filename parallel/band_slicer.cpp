@@ -91,35 +91,29 @@ struct SlotMesh {
   GapScratch gaps;
 };
 
+// The records crossing layer k, found from scratch: a query of the BVH when there is one, else a scan.
+void startRecords(const MeshState& state, uint32_t k, double z, SlotMesh& slot) {
+  if (state.bvh) {
+    startRecordsFromBvh(*state.bvh, state.march, z, k, slot.candidates);
+    slot.records.startFrom(slot.candidates, k);
+  } else {
+    slot.records.start(state.march, k);
+  }
+}
+
 // Slices layer k of one mesh into `out` (cp or sr; the band's first layer starts the sweep).
 uint32_t sliceBandLayer(const SliceMesh& mesh, const MeshState& state, SliceMethod method, uint32_t k,
                         bool first, double z, double tolerance2, SlotMesh& slot, LayerContours& out) {
-  if (method == SliceMethod::SelfReuse && state.march.missingNeighbours == 0) {
-    if (!first && slot.follow.advance(state.march, k, z, out)) return 0;
-    std::span<const uint32_t> active;
-    if (state.bvh) {
-      startRecordsFromBvh(*state.bvh, state.march, z, k, slot.candidates);
-      active = slot.candidates;
-    } else {
-      slot.records.start(state.march, k);
-      active = slot.records.records();
-    }
-    if (slot.follow.start(state.march, active, k, z, out)) return 0;
-    // Only an inconsistent table gets here (a walk that does not close): march this layer instead.
-    slot.march.prepare(state.march.facets.size());
-    slot.march.forgetWalk();
-    return marchRecordsLayer(state.march.facets, active, z, k + 1, slot.march, out);
-  }
   if (method == SliceMethod::SelfReuse) {
-    if (first) {
+    // Meshes whose table has no gaps follow the loops of the layer below (slice_follow.h); a band start,
+    // a mesh with gaps, or (only with an inconsistent table) a walk that does not close marches instead.
+    const bool closed = state.march.missingNeighbours == 0;
+    if (closed && !first && slot.follow.advance(state.march, k, z, out)) return 0;
+    if (first || closed) {
+      startRecords(state, k, z, slot);
+      if (closed && slot.follow.start(state.march, slot.records.records(), k, z, out)) return 0;
       slot.march.prepare(state.march.facets.size());
       slot.march.forgetWalk();
-      if (state.bvh) {
-        startRecordsFromBvh(*state.bvh, state.march, z, k, slot.candidates);
-        slot.records.startFrom(slot.candidates, k);
-      } else {
-        slot.records.start(state.march, k);
-      }
     } else {
       slot.records.advance(state.march);
     }
