@@ -15,7 +15,6 @@
 #include <string>
 #include <vector>
 
-#include "core/adjacency.h"
 #include "core/weld.h"
 #include "io/errors.h"
 #include "io/stl_reader.h"
@@ -36,14 +35,7 @@ fs::path model(const char* name) {
 
 // Table of the welded mesh, built the way the slicer builds it.
 TemplateTable tableOf(const FacetSoup& soup) {
-  const IndexedMesh mesh = weldCorners(soup.corners);
-  TemplateTable table;
-  table.facetCount = static_cast<uint32_t>(mesh.facetCount());
-  table.vertexCount = static_cast<uint32_t>(mesh.vertices.size());
-  table.fingerprint = connectivityFingerprint(mesh.facetVertices);
-  table.adjacency.resize(mesh.facetVertices.size());
-  buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table.adjacency);
-  return table;
+  return buildTemplateTable(weldCorners(soup.corners));
 }
 
 // A closed tetrahedron, outward facets: 4 facets, every entry >= 0.
