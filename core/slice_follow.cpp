@@ -1,6 +1,7 @@
 #include "core/slice_follow.h"
 
 #include <algorithm>
+#include <cstring>
 
 #include "core/crossing.h"
 #include "core/prefetch.h"
@@ -16,7 +17,6 @@ void LoopFollower::beginLayer(const MarchMesh& mesh, uint32_t k, double z) {
   layer_ = k;
   z_ = z;
   zf_ = planeAsFloat(z);
-  walked_.clear();
   pieces_.clear();
   order_.clear();
   runs_.clear();
@@ -49,10 +49,10 @@ void LoopFollower::endLoop(uint32_t firstPiece) {
 // run): through changed facets by the table, across runs, until it is back at the start.
 bool LoopFollower::traceLoop(const MarchMesh& mesh, uint32_t startRecord) {
   const auto firstPiece = static_cast<uint32_t>(pieces_.size());
-  auto walkBegin = static_cast<uint32_t>(walked_.size());
+  auto walkBegin = arena_.size();
   uint32_t walkLowest = UINT32_MAX, walkLowestAt = 0;
   auto endWalk = [&] {
-    const auto end = static_cast<uint32_t>(walked_.size());
+    const auto end = arena_.size();
     if (end > walkBegin)
       pieces_.push_back({kWalkedSource, walkBegin, end - walkBegin, walkLowest, walkLowestAt});
     walkBegin = end;
@@ -70,7 +70,7 @@ bool LoopFollower::traceLoop(const MarchMesh& mesh, uint32_t startRecord) {
       run.used = true;
       endWalk();
       addRun(run);
-      r = segments_[run.loop + (run.begin + run.length) % run.size].record;
+      r = arena_.lines[handles_[run.loop + (run.begin + run.length) % run.size]].record;
       continue;
     }
     const MarchFacet& f = mesh.facets[r];
@@ -79,10 +79,9 @@ bool LoopFollower::traceLoop(const MarchMesh& mesh, uint32_t startRecord) {
     const EdgeLine line = edgeLine(f.corner, kDownEdge[mask], z_);
     if (f.id < walkLowest) {
       walkLowest = f.id;
-      walkLowestAt = static_cast<uint32_t>(walked_.size());
+      walkLowestAt = arena_.size();
     }
-    walked_.push_back(
-        {line.sx, line.sy, line.ax, line.ay, line.az, r, layer_ < f.mid ? f.mid - 1 : f.last, f.id});
+    arena_.push({line.sx, line.sy, line.ax, line.ay, line.az, r}, layer_ < f.mid ? f.mid - 1 : f.last, f.id);
     mark = {generation_, kWalked};
     const int32_t exit = f.next[kUpEdge[mask]];
     if (exit < 0) return false;
@@ -103,50 +102,76 @@ void LoopFollower::emitCanonical(LayerContours& out) {
   for (const Piece& p : pieces_) total += p.length;
   const std::size_t loops = order_.size();
   // Sized without clear(): only growth is initialised, then every element is overwritten.
-  if (next_.size() < total) next_.resize(total);
+  if (nextHandles_.size() < total) nextHandles_.resize(total);
   out.z = z_;
   out.points.resize(total);
   out.facets.resize(total);
   out.loopOffsets.resize(loops + 1);
   out.loopClosed.assign(loops, 1);
   nextLoops_.resize(loops + 1);
-  Point2d* point = out.points.data();
-  uint32_t* facet = out.facets.data();
-  Segment* const first = next_.data();
-  Segment* copy = first;
-  const double z = z_;
-  auto emit = [&](const Segment* from, const Segment* to) {
-    for (const Segment* s = from; s != to; ++s) {
-      *point++ = EdgeLine{s->sx, s->sy, s->ax, s->ay, s->az}.at(z);
-      *facet++ = s->id;
-      *copy++ = *s;
+  // The handles in canonical order, stretch by stretch.
+  uint32_t* const first = nextHandles_.data();
+  uint32_t* to = first;
+  auto copy = [&](Source source, uint32_t begin, uint32_t end) {
+    if (source == kOld) {
+      std::memcpy(to, handles_.data() + begin, (end - begin) * sizeof(uint32_t));
+      to += end - begin;
+    } else {
+      for (uint32_t h = begin; h < end; ++h) *to++ = h;
     }
-  };
-  const Segment* const source[2] = {segments_.data(), walked_.data()};
-  auto emitPiece = [&](const Piece& p) {
-    emit(source[p.source] + p.begin, source[p.source] + p.begin + p.length);
   };
   out.loopOffsets[0] = 0;
   nextLoops_[0] = 0;
   for (std::size_t l = 0; l < loops; ++l) {
     const LoopOrder& o = order_[l];
     const Piece& lowest = pieces_[o.lowestPiece];
-    const Segment* base = source[lowest.source];
-    emit(base + o.lowestAt, base + lowest.begin + lowest.length);
-    for (uint32_t p = o.lowestPiece + 1; p < o.endPiece; ++p) emitPiece(pieces_[p]);
-    for (uint32_t p = o.firstPiece; p < o.lowestPiece; ++p) emitPiece(pieces_[p]);
-    emit(base + lowest.begin, base + o.lowestAt);
-    out.loopOffsets[l + 1] = static_cast<uint32_t>(point - out.points.data());
-    nextLoops_[l + 1] = static_cast<uint32_t>(copy - first);
+    copy(lowest.source, o.lowestAt, lowest.begin + lowest.length);
+    for (uint32_t p = o.lowestPiece + 1; p < o.endPiece; ++p)
+      copy(pieces_[p].source, pieces_[p].begin, pieces_[p].begin + pieces_[p].length);
+    for (uint32_t p = o.firstPiece; p < o.lowestPiece; ++p)
+      copy(pieces_[p].source, pieces_[p].begin, pieces_[p].begin + pieces_[p].length);
+    copy(lowest.source, lowest.begin, o.lowestAt);
+    out.loopOffsets[l + 1] = static_cast<uint32_t>(to - first);
+    nextLoops_[l + 1] = static_cast<uint32_t>(to - first);
   }
-  segments_.swap(next_);
+  // Then each point from its segment's line, and its facet.
+  const double z = z_;
+  const Line* const line = arena_.lines.data();
+  const uint32_t* const id = arena_.id.data();
+  Point2d* const point = out.points.data();
+  uint32_t* const facet = out.facets.data();
+  for (std::size_t i = 0; i < total; ++i) {
+    const uint32_t h = first[i];
+    point[i] = EdgeLine{line[h].sx, line[h].sy, line[h].ax, line[h].ay, line[h].az}.at(z);
+    facet[i] = id[h];
+  }
+  handles_.swap(nextHandles_);
   loops_.swap(nextLoops_);
   following_ = true;
+  if (arena_.size() > 2 * total + 4096) compactArena();
+}
+
+// Keeps only the live segments, in loop order (the arena grows by the walked segments of each layer).
+void LoopFollower::compactArena() {
+  const std::size_t live = loops_.back();
+  Arena kept;
+  kept.lines.resize(live);
+  kept.until.resize(live);
+  kept.id.resize(live);
+  for (std::size_t i = 0; i < live; ++i) {
+    const uint32_t h = handles_[i];
+    kept.lines[i] = arena_.lines[h];
+    kept.until[i] = arena_.until[h];
+    kept.id[i] = arena_.id[h];
+    handles_[i] = static_cast<uint32_t>(i);
+  }
+  std::swap(arena_, kept);
 }
 
 bool LoopFollower::start(const MarchMesh& mesh, std::span<const uint32_t> active, uint32_t k, double z,
                          LayerContours& out) {
   beginLayer(mesh, k, z);
+  arena_.clear();
   // The walk visits every active record in loop order, which is random in memory: fetching them all
   // first, in list order, overlaps the cache misses instead of taking them one after another.
   for (const uint32_t r : active) {
@@ -167,11 +192,13 @@ bool LoopFollower::advance(const MarchMesh& mesh, uint32_t k, double z, LayerCon
   const std::size_t oldLoops = loops_.size() - 1;
   for (std::size_t l = 0; l < oldLoops; ++l) {
     const uint32_t begin = loops_[l], size = loops_[l + 1] - begin;
-    const Segment* loop = segments_.data() + begin;
+    const uint32_t* handle = handles_.data() + begin;
+    const uint32_t* until = arena_.until.data();
+    const uint32_t* id = arena_.id.data();
     uint32_t firstChanged = 0, lowestId = UINT32_MAX, lowestAt = 0;
-    for (; firstChanged < size && loop[firstChanged].until >= k; ++firstChanged)
-      if (loop[firstChanged].id < lowestId) {
-        lowestId = loop[firstChanged].id;
+    for (; firstChanged < size && until[handle[firstChanged]] >= k; ++firstChanged)
+      if (id[handle[firstChanged]] < lowestId) {
+        lowestId = id[handle[firstChanged]];
         lowestAt = begin + firstChanged;
       }
     if (firstChanged == size) {
@@ -182,16 +209,16 @@ bool LoopFollower::advance(const MarchMesh& mesh, uint32_t k, double z, LayerCon
     }
     uint32_t i = firstChanged;
     do {  // loop[i] changed; the run after it ends at the next changed segment (firstChanged at the latest)
-      const uint32_t record = loop[i].record;
+      const uint32_t record = arena_.lines[handle[i]].record;
       prefetch(&mesh.facets[record]);
       prefetch(&marks_[record]);
       if (mesh.last[record] >= k) seeds_.push_back(record);
       const uint32_t runBegin = i + 1 == size ? 0 : i + 1;
       uint32_t j = runBegin, length = 0;
       Run run{begin, size, runBegin, 0, UINT32_MAX, 0, false};
-      while (loop[j].until >= k) {
-        if (loop[j].id < run.lowestId) {
-          run.lowestId = loop[j].id;
+      while (until[handle[j]] >= k) {
+        if (id[handle[j]] < run.lowestId) {
+          run.lowestId = id[handle[j]];
           run.lowestAt = begin + j;
         }
         ++length;
@@ -199,7 +226,7 @@ bool LoopFollower::advance(const MarchMesh& mesh, uint32_t k, double z, LayerCon
       }
       if (length > 0) {
         run.length = length;
-        marks_[loop[runBegin].record] = {generation_, static_cast<uint32_t>(runs_.size())};
+        marks_[arena_.lines[handle[runBegin]].record] = {generation_, static_cast<uint32_t>(runs_.size())};
         runs_.push_back(run);
       }
       i = j;
@@ -208,7 +235,7 @@ bool LoopFollower::advance(const MarchMesh& mesh, uint32_t k, double z, LayerCon
   // Loops through runs, then loops of changed facets only, then loops born at this layer.
   for (std::size_t r = 0; r < runs_.size(); ++r) {
     if (runs_[r].used) continue;
-    if (!traceLoop(mesh, segments_[runs_[r].loop + runs_[r].begin].record)) return false;
+    if (!traceLoop(mesh, arena_.lines[handles_[runs_[r].loop + runs_[r].begin]].record)) return false;
   }
   for (const uint32_t r : seeds_)
     if (marks_[r].generation != generation_ && !traceLoop(mesh, r)) return false;

@@ -5,7 +5,8 @@
 // corner (one crossed edge is swapped for another) or its bottom corner (it starts crossing). At 1 um
 // that is a few hundred facets per layer out of thousands, so instead of walking the table for every
 // segment of every layer, the follower keeps each loop of the last layer as an array of segments (the
-// facet, the line of its entry edge, the last layer it stays valid) and builds layer k from it:
+// facet, the line of its entry edge, the last layer it stays valid; stored once, in an arena, and moved
+// from layer to layer as 4-byte handles) and builds layer k from it:
 //   - each loop is cut into runs of segments still valid at k, which carry over unchanged;
 //   - from the end of a run the table is walked through the changed facets until the start of the next
 //     run (which may come from another loop: splits and merges need no special case);
@@ -39,20 +40,37 @@ class LoopFollower {
   bool advance(const MarchMesh& mesh, uint32_t k, double z, LayerContours& out);
 
  private:
-  struct Segment {  // the loop enters facet `record` across the edge whose line is (a, s)
+  struct Line {  // the loop enters facet `record` across the edge whose line is (a, s): 32 bytes
     double sx, sy;
     float ax, ay, az;
     uint32_t record;  // in MarchMesh::facets
-    uint32_t until;   // last layer with the same crossed edges
-    uint32_t id;      // facet index in the model
+  };
+  // Every segment made since the last start, as three arrays indexed by a segment's handle. A segment
+  // never changes while it lives, so layer to layer the loops move only as arrays of handles; the cut
+  // into runs reads only `until` and `id`.
+  struct Arena {
+    std::vector<Line> lines;
+    std::vector<uint32_t> until;  // last layer with the same crossed edges
+    std::vector<uint32_t> id;     // facet index in the model
+    uint32_t size() const { return static_cast<uint32_t>(lines.size()); }
+    void clear() {
+      lines.clear();
+      until.clear();
+      id.clear();
+    }
+    void push(const Line& line, uint32_t last, uint32_t facet) {
+      lines.push_back(line);
+      until.push_back(last);
+      id.push_back(facet);
+    }
   };
   struct Run {  // segments [begin, begin + length) of an old loop, cyclically within [loop, loop + size)
     uint32_t loop, size, begin, length;
-    uint32_t lowestId, lowestAt;  // its lowest facet index and where (in segments_)
+    uint32_t lowestId, lowestAt;  // its lowest facet index and where (in handles_)
     bool used;
   };
-  // A stretch of a loop being built: segments [begin, begin + length) of segments_ (runs, loops carried
-  // over whole) or of walked_ (facets walked this layer).
+  // A stretch of a loop being built: positions [begin, begin + length) of handles_ (runs, loops carried
+  // over whole), or the segments with handles [begin, begin + length) (facets walked this layer).
   enum Source : uint32_t { kOld = 0, kWalkedSource = 1 };
   struct Piece {
     Source source;
@@ -73,17 +91,18 @@ class LoopFollower {
   void addRun(const Run& run);
   void endLoop(uint32_t firstPiece);
   void emitCanonical(LayerContours& out);
+  void compactArena();
 
-  std::vector<Segment> segments_, next_;        // last layer's loops (canonical), the next layer's
-  std::vector<uint32_t> loops_{0}, nextLoops_;  // loop offsets into segments_ / next_
-  std::vector<Segment> walked_;
+  Arena arena_;
+  std::vector<uint32_t> handles_, nextHandles_;  // last layer's loops (canonical), the next layer's
+  std::vector<uint32_t> loops_{0}, nextLoops_;   // loop offsets into handles_ / nextHandles_
   std::vector<Piece> pieces_;
   std::vector<LoopOrder> order_;
   std::vector<Run> runs_;
   std::vector<uint32_t> seeds_;
   std::vector<Mark> marks_;
   uint32_t generation_ = 0, layer_ = 0;
-  bool following_ = false;  // segments_ holds layer_'s loops
+  bool following_ = false;  // handles_ holds layer_'s loops
   double z_ = 0;
   float zf_ = 0;
 };
