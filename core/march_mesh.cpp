@@ -4,20 +4,31 @@
 
 namespace toposlice {
 
-void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh) {
-  mesh.facets.resize(layers.bucketFacets.size());
+void allocateMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh) {
+  const std::size_t records = layers.bucketFacets.size();
+  mesh.facets.resize(records);
   mesh.layerStart = layers.bucketOffsets;
   mesh.position.assign(facetCount, -1);
-  mesh.last.resize(layers.bucketFacets.size());
-  mesh.blockLast.assign(
-      (layers.bucketFacets.size() + MarchMesh::kBlockRecords - 1) / MarchMesh::kBlockRecords, 0);
-  for (std::size_t p = 0; p < layers.bucketFacets.size(); ++p) {
-    mesh.position[layers.bucketFacets[p]] = static_cast<int32_t>(p);
-    const uint32_t last = layers.last[layers.bucketFacets[p]];
-    mesh.last[p] = last;
-    uint32_t& block = mesh.blockLast[p / MarchMesh::kBlockRecords];
-    block = std::max(block, last);
+  mesh.last.resize(records);
+  mesh.blockLast.resize((records + MarchMesh::kBlockRecords - 1) / MarchMesh::kBlockRecords);
+}
+
+void placeMarchRecords(const FacetLayers& layers, std::size_t begin, std::size_t end, MarchMesh& mesh) {
+  for (std::size_t block = begin; block < end; block += MarchMesh::kBlockRecords) {
+    uint32_t blockLast = 0;
+    for (std::size_t p = block; p < std::min(end, block + MarchMesh::kBlockRecords); ++p) {
+      const uint32_t f = layers.bucketFacets[p];
+      mesh.position[f] = static_cast<int32_t>(p);
+      mesh.last[p] = layers.last[f];
+      blockLast = std::max(blockLast, layers.last[f]);
+    }
+    mesh.blockLast[block / MarchMesh::kBlockRecords] = blockLast;
   }
+}
+
+void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh) {
+  allocateMarchMesh(layers, facetCount, mesh);
+  placeMarchRecords(layers, 0, mesh.facets.size(), mesh);
 }
 
 void ActiveRecords::start(const MarchMesh& mesh, uint32_t layer) {

@@ -9,7 +9,10 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <new>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "core/layer_ranges.h"
@@ -28,8 +31,29 @@ struct alignas(64) MarchFacet {
 };
 static_assert(sizeof(MarchFacet) == 64);
 
+// An allocator whose resize() leaves trivial elements uninitialised: the record array is written whole
+// by fillMarchFacets, so zeroing it first (and faulting its pages in on one thread) would be wasted.
+template <class T>
+struct UninitialisedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitialisedAllocator<U>;
+  };
+  UninitialisedAllocator() = default;
+  template <class U>
+  explicit UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+
 struct MarchMesh {
-  std::vector<MarchFacet> facets;    // crossing facets in first-layer order
+  std::vector<MarchFacet, UninitialisedAllocator<MarchFacet>> facets;  // crossing facets, first-layer order
   std::vector<uint32_t> layerStart;  // per layer + 1: records whose first layer is k start at layerStart[k]
   std::vector<int32_t> position;     // per model facet: its record, or -1 when it crosses no plane
   std::vector<uint32_t> last;        // per record: last layer (compact copy for band start scans)
@@ -60,7 +84,14 @@ class ActiveRecords {
   uint32_t layer_ = 0;
 };
 
-// Sizes the mesh and fills `position` and `layerStart` from the buckets (serial, linear).
+// Sizes the mesh (records left unwritten) and fills `layerStart`; `position` is -1 everywhere.
+void allocateMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh);
+
+// Fills `position`, `last` and `blockLast` for records [begin, end); `begin` must be a multiple of
+// MarchMesh::kBlockRecords (callers may split the records across threads in such ranges).
+void placeMarchRecords(const FacetLayers& layers, std::size_t begin, std::size_t end, MarchMesh& mesh);
+
+// allocateMarchMesh, then placeMarchRecords for every record (serial).
 void prepareMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh);
 
 // Fills records [begin, end) (callers may split the range across threads) and returns how many of their

@@ -201,7 +201,12 @@ SliceStats sliceMeshes(std::span<const SliceMesh> meshes, std::span<const double
   if (settings.method == SliceMethod::SelfReuse) {
     for (std::size_t i = 0; i < meshes.size(); ++i) {
       MeshState& state = states[i];
-      prepareMarchMesh(state.layers, meshes[i].corners.size() / 3, state.march);
+      allocateMarchMesh(state.layers, meshes[i].corners.size() / 3, state.march);
+      constexpr std::size_t kBlock = MarchMesh::kBlockRecords;
+      const std::size_t records = state.march.facets.size();
+      parallelForChunks(state.march.blockLast.size(), 64, [&](std::size_t b0, std::size_t b1) {
+        placeMarchRecords(state.layers, b0 * kBlock, std::min(records, b1 * kBlock), state.march);
+      });
       std::atomic<std::size_t> missing{0};
       parallelForChunks(state.march.facets.size(), 16384, [&](std::size_t begin, std::size_t end) {
         missing += fillMarchFacets(meshes[i].corners, meshes[i].adjacency, state.layers, planes, begin, end,
