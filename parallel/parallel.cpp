@@ -4,9 +4,11 @@
 #include <tbb/concurrent_queue.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/parallel_pipeline.h>
 
 #include <atomic>
+#include <exception>
 #include <optional>
 #include <vector>
 
@@ -43,6 +45,27 @@ void parallelForChunks(std::size_t count, std::size_t grain,
                       handoff.fetch_add(1, std::memory_order_release);
                     });
   (void)handoff.load(std::memory_order_acquire);
+}
+
+void parallelInvoke(const std::function<void()>& a, const std::function<void()>& b) {
+  std::exception_ptr errorA, errorB;
+  tbb::parallel_invoke(
+      [&] {
+        try {
+          a();
+        } catch (...) {
+          errorA = std::current_exception();
+        }
+      },
+      [&] {
+        try {
+          b();
+        } catch (...) {
+          errorB = std::current_exception();
+        }
+      });
+  if (errorA) std::rethrow_exception(errorA);
+  if (errorB) std::rethrow_exception(errorB);
 }
 
 void orderedPipeline(std::size_t count, std::size_t inFlight,

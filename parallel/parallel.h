@@ -28,6 +28,11 @@ class ThreadLimit {
 void parallelForChunks(std::size_t count, std::size_t grain,
                        const std::function<void(std::size_t, std::size_t)>& body);
 
+// Runs a() and b() at the same time when a second thread is free, and returns when both are done. When
+// either throws, the exception of a() is rethrown if it threw, else b()'s: the same error whatever the
+// timing.
+void parallelInvoke(const std::function<void()>& a, const std::function<void()>& b);
+
 // An ordered bounded pipeline over tasks 0..count-1: work(i, slot) runs in parallel on at most
 // `inFlight` tasks at once, each given a slot index in [0, inFlight) that no other running task holds
 // (for per-slot buffers); then consume(i, slot) runs serially, in ascending i. Memory stays bounded by

@@ -324,11 +324,7 @@ int run(int argc, char** argv) {
       options.masks.origin = std::pair<double, double>{x, y};
     }
     options.rebuildOnMismatch = onMismatch == "rebuild";
-    TemplateTable table;
-    if (!templatePath.empty()) {
-      table = readTemplateFile(templatePath);
-      options.templateTable = &table;
-    }
+    options.templateFile = templatePath;
     return runSlice(model, options, common);
   };
   try {

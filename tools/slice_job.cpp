@@ -73,12 +73,12 @@ void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* s
 
 // The model's adjacency: loaded from a verified template, built, or none (cp / sr-lazy discover it).
 std::span<const int32_t> modelTopology(const std::filesystem::path& model, const FacetSoup& soup,
-                                       const SliceJobOptions& options, SliceJobResult& result,
-                                       std::vector<int32_t>& built) {
+                                       const TemplateTable* templateTable, const SliceJobOptions& options,
+                                       SliceJobResult& result, std::vector<int32_t>& built) {
   const SliceMethod method = options.slice.method;
   bool build = method == SliceMethod::SelfReuse;
-  if (options.templateTable != nullptr && method != SliceMethod::ClosestPoint) {
-    const TemplateTable& table = *options.templateTable;
+  if (templateTable != nullptr && method != SliceMethod::ClosestPoint) {
+    const TemplateTable& table = *templateTable;
     // Linear check (core/variant_check.h): facet count, then every adjacent pair shares its edge.
     const std::optional<VariantMismatch> mismatch =
         checkVariantConnectivityParallel(soup.corners, table.adjacency);
@@ -212,7 +212,17 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   checkDistinctOutputs(options);
   SliceJobResult result;
   auto start = std::chrono::steady_clock::now();
-  FacetSoup soup = readStl(model);
+  FacetSoup soup;
+  // A template file is read (and its checksum checked) on a second thread while the model is read.
+  TemplateTable loadedTemplate;
+  const TemplateTable* templateTable = options.templateTable;
+  if (templateTable == nullptr && !options.templateFile.empty()) {
+    parallelInvoke([&] { loadedTemplate = readTemplateFile(options.templateFile); },
+                   [&] { soup = readStl(model); });
+    templateTable = &loadedTemplate;
+  } else {
+    soup = readStl(model);
+  }
   std::vector<FacetSoup> features;  // add-ons first, then removals
   for (const auto* list : {&options.add, &options.remove})
     for (const auto& path : *list) features.push_back(readStl(path));
@@ -232,7 +242,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   start = std::chrono::steady_clock::now();
   const SliceMethod method = options.slice.method;
   std::vector<int32_t> built;
-  std::span<const int32_t> adjacency = modelTopology(model, soup, options, result, built);
+  std::span<const int32_t> adjacency = modelTopology(model, soup, templateTable, options, result, built);
   // Features are separate meshes with their own tables; the template's table is never touched.
   std::vector<std::vector<int32_t>> featureTables(features.size());
   if (method == SliceMethod::SelfReuse)

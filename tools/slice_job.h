@@ -40,6 +40,7 @@ struct SliceJobOptions {
   std::string svgLayers = "mid";
   bool overwrite = false;
   const TemplateTable* templateTable = nullptr;  // intra-model reuse: skip welding and adjacency
+  std::filesystem::path templateFile;            // or the table's file, read while the model is read
   bool rebuildOnMismatch = false;                // a variant that does not match: rebuild instead of failing
   bool fixOrientation = false;                   // flip every facet of an inside-out (negative volume) mesh
   MaskOptions masks;
