@@ -1,4 +1,6 @@
 // OpenVDB mask stack writer (OpenVDB 10: io::Archive, Tree::touchLeaf/addTile, math::Transform).
+// Built into the OpenVDB module (io/vdb_module.h), not into toposlice_io.
+#include "io/vdb_module.h"
 #include "io/vdb_writer.h"
 
 #include <algorithm>
@@ -243,14 +245,12 @@ int intMeta(const openvdb::GridBase& grid, const char* name) {
   return meta ? meta->value() : -1;
 }
 
-}  // namespace
-
-std::unique_ptr<MaskSink> makeVdbSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite) {
+std::unique_ptr<MaskSink> makeSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite) {
   if (job.antiAliased) return std::make_unique<VdbSink<openvdb::FloatGrid>>(path, job, overwrite);
   return std::make_unique<VdbSink<openvdb::MaskGrid>>(path, job, overwrite);
 }
 
-std::vector<VdbSlab> readVdbSlabs(const std::filesystem::path& file) {
+std::vector<VdbSlab> readSlabs(const std::filesystem::path& file) {
   std::vector<VdbSlab> slabs;
   try {
     openvdb::initialize();
@@ -277,7 +277,7 @@ std::vector<VdbSlab> readVdbSlabs(const std::filesystem::path& file) {
   return slabs;
 }
 
-MaskImage readVdbLayer(const std::filesystem::path& file, uint32_t layer, uint32_t width, uint32_t height) {
+MaskImage readLayer(const std::filesystem::path& file, uint32_t layer, uint32_t width, uint32_t height) {
   MaskImage image;
   image.width = width;
   image.height = height;
@@ -324,4 +324,11 @@ MaskImage readVdbLayer(const std::filesystem::path& file, uint32_t layer, uint32
   throw InputError(file.string() + ": no grid holds layer " + std::to_string(layer));
 }
 
+}  // namespace
 }  // namespace toposlice
+
+extern "C" __attribute__((visibility("default"))) const toposlice::VdbModule* toposlice_vdb_module() {
+  static const toposlice::VdbModule module{toposlice::kVdbModuleVersion, toposlice::makeSink,
+                                           toposlice::readSlabs, toposlice::readLayer};
+  return &module;
+}
