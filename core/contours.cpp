@@ -5,16 +5,30 @@
 namespace toposlice {
 
 double signedArea(std::span<const Point2d> loop) {
-  if (loop.size() < 3) return 0.0;
+  const std::size_t n = loop.size();
+  if (n < 3) return 0.0;
   // Shifted to the first point to keep the products small (better conditioning far from the origin).
+  // Four partial sums, term i going to sum (i - 1) % 4: four independent chains of additions instead of
+  // one (a sum over every point of every layer is otherwise bound by the latency of one addition).
   const Point2d o = loop[0];
-  double twice = 0.0;
-  for (std::size_t i = 1; i + 1 < loop.size(); ++i) {
-    const double ax = loop[i].x - o.x, ay = loop[i].y - o.y;
-    const double bx = loop[i + 1].x - o.x, by = loop[i + 1].y - o.y;
-    twice += ax * by - ay * bx;
+  double sum[4] = {0.0, 0.0, 0.0, 0.0};
+  double px = loop[1].x - o.x, py = loop[1].y - o.y;
+  std::size_t i = 1;
+  for (; i + 4 < n; i += 4) {
+    for (std::size_t r = 0; r < 4; ++r) {
+      const double qx = loop[i + r + 1].x - o.x, qy = loop[i + r + 1].y - o.y;
+      sum[r] += px * qy - py * qx;
+      px = qx;
+      py = qy;
+    }
   }
-  return 0.5 * twice;
+  for (std::size_t r = 0; i + 1 < n; ++i, ++r) {
+    const double qx = loop[i + 1].x - o.x, qy = loop[i + 1].y - o.y;
+    sum[r] += px * qy - py * qx;
+    px = qx;
+    py = qy;
+  }
+  return 0.5 * ((sum[0] + sum[1]) + (sum[2] + sum[3]));
 }
 
 void canonicalizeLayer(LayerContours& layer, CanonicalScratch& scratch) {
