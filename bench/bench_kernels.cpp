@@ -171,6 +171,26 @@ void BM_FollowLoops(benchmark::State& state) {
 }
 BENCHMARK(BM_FollowLoops)->Unit(benchmark::kMillisecond);
 
+// Band starts: 64 layers spread over the height, each found and walked from scratch (what every band of
+// the parallel engine does once).
+void BM_FollowStarts(benchmark::State& state) {
+  const Fixture& f = fixture();
+  LoopFollower follower;
+  ActiveRecords active;
+  LayerContours out;
+  uint64_t segments = 0;
+  for (auto _ : state) {
+    for (uint32_t i = 0; i < 64; ++i) {
+      const auto k = static_cast<uint32_t>((f.planes.size() - 1) * (2 * i + 1) / 128);
+      active.start(f.march, k);
+      follower.start(f.march, active.records(), k, f.planes[k], out);
+      segments += out.points.size();
+    }
+  }
+  state.SetItemsProcessed(static_cast<int64_t>(segments));
+}
+BENCHMARK(BM_FollowStarts)->Unit(benchmark::kMillisecond);
+
 // One mid-height layer joined by the closest-point rule (O(s^2)).
 void BM_ClosestPointLayer(benchmark::State& state) {
   const Fixture& f = fixture();
