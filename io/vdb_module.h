@@ -20,7 +20,8 @@ inline constexpr uint32_t kVdbModuleVersion = 1;  // raised whenever VdbModule c
 
 struct VdbModule {
   uint32_t version;
-  std::unique_ptr<MaskSink> (*makeSink)(const std::filesystem::path& path, const MaskJob& job, bool overwrite);
+  std::unique_ptr<MaskSink> (*makeSink)(const std::filesystem::path& path, const MaskJob& job,
+                                        bool overwrite);
   std::vector<VdbSlab> (*readSlabs)(const std::filesystem::path& file);
   MaskImage (*readLayer)(const std::filesystem::path& file, uint32_t layer, uint32_t width, uint32_t height);
 };
