@@ -310,7 +310,11 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   double volumeMm3 = 0;
 
   LayerStages stages;
+  // Per-layer area and islands feed the masks (the archive's resin volume) and the report; a contour-only
+  // run without a report prints no volume, so it skips that pass over every point.
+  const bool measureLayers = masks || report;
   stages.process = [&](uint32_t, std::span<const LayerContours> layer, std::size_t slot, uint32_t position) {
+    if (!measureLayers) return;
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
     r.islands = 0;
