@@ -120,16 +120,15 @@ void LoopFollower::emitCanonical(LayerContours& out) {
       for (uint32_t h = begin; h < end; ++h) *to++ = h;
     }
   };
+  auto copyPiece = [&](const Piece& p) { copy(p.source, p.begin, p.begin + p.length); };
   out.loopOffsets[0] = 0;
   nextLoops_[0] = 0;
   for (std::size_t l = 0; l < loops; ++l) {
     const LoopOrder& o = order_[l];
     const Piece& lowest = pieces_[o.lowestPiece];
     copy(lowest.source, o.lowestAt, lowest.begin + lowest.length);
-    for (uint32_t p = o.lowestPiece + 1; p < o.endPiece; ++p)
-      copy(pieces_[p].source, pieces_[p].begin, pieces_[p].begin + pieces_[p].length);
-    for (uint32_t p = o.firstPiece; p < o.lowestPiece; ++p)
-      copy(pieces_[p].source, pieces_[p].begin, pieces_[p].begin + pieces_[p].length);
+    for (uint32_t p = o.lowestPiece + 1; p < o.endPiece; ++p) copyPiece(pieces_[p]);
+    for (uint32_t p = o.firstPiece; p < o.lowestPiece; ++p) copyPiece(pieces_[p]);
     copy(lowest.source, lowest.begin, o.lowestAt);
     out.loopOffsets[l + 1] = static_cast<uint32_t>(to - first);
     nextLoops_[l + 1] = static_cast<uint32_t>(to - first);
