@@ -17,8 +17,8 @@
 #include "core/slice_follow.h"
 #include "core/slice_march.h"
 #include "core/weld.h"
-#include "io/mask_png.h"
-#include "io/stl_reader.h"
+#include "io/masks/mask_png.h"
+#include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
 
 namespace toposlice {

@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "core/mask_image.h"
-#include "io/mask_png.h"
+#include "io/masks/mask_png.h"
 
 namespace toposlice {
 namespace {

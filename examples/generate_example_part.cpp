@@ -4,7 +4,7 @@
 #include <cstdio>
 #include <exception>
 
-#include "io/stl_writer.h"
+#include "io/readers/stl_writer.h"
 #include "tests/fixtures/shapes.h"
 
 int main(int argc, char** argv) {

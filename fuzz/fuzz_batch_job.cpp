@@ -1,4 +1,4 @@
-// libFuzzer harness for the batch job reader (io/batch_job.h): the input is the job's JSON text, parsed
+// libFuzzer harness for the batch job reader (io/jobs/batch_job.h): the input is the job's JSON text, parsed
 // against a fixed absolute base folder. InputError is the expected answer to bad input; any other
 // exception, a sanitizer report or a returned job that breaks a promise of the header is a crash:
 // - at least one variant; names non-empty and unique; every variant has a model and an output;
@@ -19,8 +19,8 @@
 #include <string>
 #include <string_view>
 
-#include "io/batch_job.h"
 #include "io/errors.h"
+#include "io/jobs/batch_job.h"
 
 namespace {
 

@@ -1,6 +1,6 @@
-// libFuzzer harness for the STL reader (io/stl_reader.h): binary, ASCII and gzip-compressed bytes all go
-// through parseStl, which tells them apart by content. InputError is the expected answer to bad input;
-// any other exception, a sanitizer report or a broken invariant of a loaded soup is a crash:
+// libFuzzer harness for the STL reader (io/readers/stl_reader.h): binary, ASCII and gzip-compressed bytes all
+// go through parseStl, which tells them apart by content. InputError is the expected answer to bad input; any
+// other exception, a sanitizer report or a broken invariant of a loaded soup is a crash:
 // - at least one facet, 3 corners per facet, every coordinate finite;
 // - StlSource::gzip exactly when the bytes start with the gzip magic 1f 8b;
 // - an uncompressed binary file is exactly 84 + 50 n bytes for its n facets, and its corners are the
@@ -14,7 +14,7 @@
 #include <span>
 
 #include "io/errors.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 
 namespace {
 

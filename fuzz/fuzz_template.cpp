@@ -1,4 +1,4 @@
-// libFuzzer harness for the template reader (io/template_file.h). Each input is parsed twice:
+// libFuzzer harness for the template reader (io/jobs/template_file.h). Each input is parsed twice:
 // 1. as given, which exercises the header, size and checksum checks;
 // 2. with its last 8 bytes replaced by the right checksum (templateChecksum), so that mutated tables get
 //    past the checksum and reach the flag, count and adjacency validation behind it.
@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "io/errors.h"
-#include "io/template_file.h"
+#include "io/jobs/template_file.h"
 
 namespace {
 
@@ -51,7 +51,7 @@ void checkTable(std::span<const std::byte> bytes, const toposlice::TemplateTable
     }
   }
 
-  // The file layout (io/template_file.h), rebuilt from the table: it must be the input.
+  // The file layout (io/jobs/template_file.h), rebuilt from the table: it must be the input.
   require(bytes.size() == kTemplateHeaderSize + 12 * t + kTemplateChecksumSize, "file size is 40 + 12 t");
   std::vector<std::byte> file(bytes.size());
   const uint32_t header[4] = {toposlice::kTemplateFormatVersion, table.facetCount, table.vertexCount, 0};

@@ -1,7 +1,7 @@
 // Batch job files: a full job and the bundled example parse into the expected fields; every kind of bad
 // job (invalid JSON, unknown or repeated keys, wrong types, bad values, clashing names and paths) fails
 // with an InputError naming the file and the JSON path of the problem.
-#include "io/batch_job.h"
+#include "io/jobs/batch_job.h"
 
 #include <gtest/gtest.h>
 

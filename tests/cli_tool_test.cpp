@@ -30,7 +30,7 @@
 #include <thread>
 #include <vector>
 
-#include "io/mask_png.h"
+#include "io/masks/mask_png.h"
 
 namespace toposlice {
 namespace {

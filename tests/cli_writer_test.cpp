@@ -17,7 +17,7 @@
 #include <unistd.h>
 
 #include "core/contours.h"
-#include "io/cli_writer.h"
+#include "io/contours/cli_writer.h"
 #include "io/errors.h"
 #include "io/output_file.h"
 #include "tests/fixtures/scratch_dir.h"

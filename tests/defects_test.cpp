@@ -10,7 +10,7 @@
 #include "core/planes.h"
 #include "core/rasterize.h"
 #include "core/weld.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
 
 namespace toposlice {

@@ -15,7 +15,7 @@
 #include "core/crossing.h"
 #include "core/layer_ranges.h"
 #include "core/march_mesh.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 #include "parallel/parallel.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"

@@ -25,7 +25,7 @@
 #include "core/mesh.h"
 #include "core/mesh_info.h"
 #include "core/rasterize.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 #include "parallel/embree_queries.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"

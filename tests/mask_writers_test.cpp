@@ -21,11 +21,11 @@
 #include <vector>
 
 #include "io/errors.h"
-#include "io/exr_writer.h"
-#include "io/mask_png.h"
-#include "io/mask_sink.h"
-#include "io/sl1_writer.h"
-#include "io/vdb_writer.h"
+#include "io/masks/exr_writer.h"
+#include "io/masks/mask_png.h"
+#include "io/masks/mask_sink.h"
+#include "io/masks/sl1_writer.h"
+#include "io/masks/vdb_writer.h"
 
 namespace toposlice {
 namespace {

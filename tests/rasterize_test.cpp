@@ -1,5 +1,5 @@
 #include "core/rasterize.h"
-#include "io/mask_png.h"
+#include "io/masks/mask_png.h"
 
 #include <gtest/gtest.h>
 

@@ -12,7 +12,7 @@
 #include "core/slice_follow.h"
 #include "core/slice_march.h"
 #include "core/weld.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"
 

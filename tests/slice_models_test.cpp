@@ -7,7 +7,7 @@
 
 #include "core/mesh_info.h"
 #include "core/planes.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
 
 namespace toposlice {

@@ -1,6 +1,6 @@
 // STL reader: one decision per file of ../shared/models/stl_parser_edge_cases (the table below), real
 // models in binary, ASCII and gzip form, and malformed bytes made here (truncations, NaN, corrupt gzip).
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 
 #include <gtest/gtest.h>
 

@@ -11,8 +11,8 @@
 #include <unistd.h>
 
 #include "core/contours.h"
+#include "io/contours/svg_writer.h"
 #include "io/errors.h"
-#include "io/svg_writer.h"
 #include "tests/fixtures/scratch_dir.h"
 
 namespace toposlice {

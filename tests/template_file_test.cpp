@@ -1,7 +1,7 @@
 // Template files (.topo): round trip of real tables, and every kind of malformed file rejected with a
 // clear InputError (truncation, flipped bytes, wrong version, trailing bytes, invalid tables behind a
 // valid checksum, random mutations).
-#include "io/template_file.h"
+#include "io/jobs/template_file.h"
 
 #include <gtest/gtest.h>
 
@@ -17,14 +17,14 @@
 
 #include "core/weld.h"
 #include "io/errors.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 
 namespace toposlice {
 namespace {
 
 namespace fs = std::filesystem;
 
-// The shared meshes through the project's STL reader (io/stl_reader.h).
+// The shared meshes through the project's STL reader (io/readers/stl_reader.h).
 FacetSoup loadBinaryStl(const fs::path& path) {
   return readStl(path);
 }

@@ -19,8 +19,8 @@
 
 #include "Model/COM/NMR_DLLInterfaces.h"
 #include "core/contours.h"
+#include "io/contours/threemf_writer.h"
 #include "io/errors.h"
-#include "io/threemf_writer.h"
 #include "tests/fixtures/scratch_dir.h"
 
 namespace toposlice {

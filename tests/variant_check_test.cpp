@@ -15,8 +15,8 @@
 
 #include "core/adjacency.h"
 #include "core/weld.h"
-#include "io/stl_reader.h"
-#include "io/template_file.h"
+#include "io/jobs/template_file.h"
+#include "io/readers/stl_reader.h"
 #include "parallel/variant_screen.h"
 
 namespace toposlice {
@@ -24,7 +24,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The shared meshes through the project's STL reader (io/stl_reader.h).
+// The shared meshes through the project's STL reader (io/readers/stl_reader.h).
 FacetSoup loadBinaryStl(const fs::path& path) {
   return readStl(path);
 }

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "io/batch_job.h"
+#include "io/jobs/batch_job.h"
 #include "parallel/parallel.h"
 #include "tools/batch_plan.h"
 #include "tools/progress_bar.h"

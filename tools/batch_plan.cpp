@@ -6,7 +6,7 @@
 
 #include "core/weld.h"
 #include "io/errors.h"
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 
 namespace toposlice {
 

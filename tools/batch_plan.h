@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "core/progress.h"
-#include "io/batch_job.h"
-#include "io/template_file.h"
+#include "io/jobs/batch_job.h"
+#include "io/jobs/template_file.h"
 #include "tools/slice_job.h"
 
 namespace toposlice {

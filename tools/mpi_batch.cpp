@@ -45,8 +45,8 @@
 #include <thread>
 #include <vector>
 
-#include "io/batch_job.h"
 #include "io/errors.h"
+#include "io/jobs/batch_job.h"
 #include "io/output_file.h"
 #include "parallel/parallel.h"
 #include "tools/batch_plan.h"

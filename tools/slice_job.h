@@ -15,7 +15,7 @@
 #include "core/mesh.h"
 #include "core/planes.h"
 #include "core/progress.h"
-#include "io/template_file.h"
+#include "io/jobs/template_file.h"
 #include "parallel/band_slicer.h"
 
 namespace toposlice {

@@ -22,7 +22,7 @@
 #include <memory>
 #include <string>
 
-#include "io/mask_sink.h"
+#include "io/masks/mask_sink.h"
 
 namespace toposlice {
 

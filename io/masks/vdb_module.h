@@ -1,4 +1,4 @@
-// The OpenVDB module: io/vdb_writer.cpp is built as its own shared object (libtoposlice_vdb.so, beside
+// The OpenVDB module: io/masks/vdb_writer.cpp is built as its own shared object (libtoposlice_vdb.so, beside
 // the toposlice program), loaded the first time a .vdb file is written or read. Linking OpenVDB into
 // the program made every run pay for its dynamic relocations at start (about 30 ms, more than reading
 // a template table); now only .vdb jobs do. The module uses the program's own io classes (OutputFile,
@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "core/mask_image.h"
-#include "io/mask_sink.h"
-#include "io/vdb_writer.h"
+#include "io/masks/mask_sink.h"
+#include "io/masks/vdb_writer.h"
 
 namespace toposlice {
 

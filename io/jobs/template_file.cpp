@@ -1,4 +1,4 @@
-#include "io/template_file.h"
+#include "io/jobs/template_file.h"
 
 #include <algorithm>
 #include <bit>

@@ -32,7 +32,7 @@
 #include <memory>
 
 #include "core/mesh.h"
-#include "io/contour_sink.h"
+#include "io/contours/contour_sink.h"
 
 namespace toposlice {
 

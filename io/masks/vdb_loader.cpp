@@ -1,12 +1,12 @@
-// makeVdbSink, readVdbSlabs and readVdbLayer, forwarded to the OpenVDB module (io/vdb_module.h), which
+// makeVdbSink, readVdbSlabs and readVdbLayer, forwarded to the OpenVDB module (io/masks/vdb_module.h), which
 // is loaded on first use: from the running program's folder, else from where this build put it.
 #include <dlfcn.h>
 
 #include <string>
 
 #include "io/errors.h"
-#include "io/vdb_module.h"
-#include "io/vdb_writer.h"
+#include "io/masks/vdb_module.h"
+#include "io/masks/vdb_writer.h"
 
 namespace toposlice {
 namespace {

@@ -1,4 +1,4 @@
-#include "io/layer_report.h"
+#include "io/jobs/layer_report.h"
 
 #include <cstdio>
 

@@ -5,7 +5,7 @@
 // from display_pixels_x/y) and the SL1 firmware's project config (jobDir is the PNG name prefix,
 // numFade >= 2 because the fade divides by numFade - 1, printerModel must match the printer,
 // layerHeightFirst defaults to 0.05 mm when absent).
-#include "io/sl1_writer.h"
+#include "io/masks/sl1_writer.h"
 
 #include <algorithm>
 #include <cerrno>
@@ -24,7 +24,7 @@
 #include <unistd.h>
 
 #include "io/errors.h"
-#include "io/mask_png.h"
+#include "io/masks/mask_png.h"
 #include "io/output_file.h"
 
 namespace toposlice {

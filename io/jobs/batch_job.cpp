@@ -1,4 +1,4 @@
-#include "io/batch_job.h"
+#include "io/jobs/batch_job.h"
 
 #include <algorithm>
 #include <cctype>

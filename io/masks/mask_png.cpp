@@ -1,6 +1,6 @@
 // PNG encoding for masks (PNG 1.2 spec; deflate RFC 1951; zlib stream RFC 1950), the PNG-directory sink,
 // the sink factory and StagedDirectory.
-#include "io/mask_png.h"
+#include "io/masks/mask_png.h"
 
 #include <algorithm>
 #include <array>
@@ -20,10 +20,10 @@
 #include <zlib.h>
 
 #include "io/errors.h"
-#include "io/exr_writer.h"
+#include "io/masks/exr_writer.h"
+#include "io/masks/sl1_writer.h"
+#include "io/masks/vdb_writer.h"
 #include "io/output_file.h"
-#include "io/sl1_writer.h"
-#include "io/vdb_writer.h"
 
 namespace toposlice {
 namespace {

@@ -1,7 +1,7 @@
 // OpenVDB mask stack writer (OpenVDB 10: io::Archive, Tree::touchLeaf/addTile, math::Transform).
-// Built into the OpenVDB module (io/vdb_module.h), not into toposlice_io.
-#include "io/vdb_writer.h"
-#include "io/vdb_module.h"
+// Built into the OpenVDB module (io/masks/vdb_module.h), not into toposlice_io.
+#include "io/masks/vdb_writer.h"
+#include "io/masks/vdb_module.h"
 
 #include <algorithm>
 #include <cmath>

@@ -7,7 +7,7 @@
 // meshresolution fullres|lowres; "lowres" requires the extension in requiredextensions; polygons of
 // "model" objects must be closed; a slicestack must be defined before the object that references it).
 // Checked against lib3mf 1.8 as a reader (tests/threemf_writer_test.cpp).
-#include "io/threemf_writer.h"
+#include "io/contours/threemf_writer.h"
 
 #include <algorithm>
 #include <cassert>
@@ -28,10 +28,10 @@
 #include <unistd.h>
 
 #include "core/weld.h"
+#include "io/contours/xml_text.h"
 #include "io/errors.h"
 #include "io/output_file.h"
 #include "io/text_buffer.h"
-#include "io/xml_text.h"
 
 namespace toposlice {
 namespace {

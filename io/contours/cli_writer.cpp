@@ -1,4 +1,4 @@
-#include "io/cli_writer.h"
+#include "io/contours/cli_writer.h"
 
 #include <bit>
 #include <cassert>

@@ -1,5 +1,5 @@
 // OpenEXR mask stack writer (OpenEXR 3.1 C++ API: Imf::Header, Imf::OutputFile, Imf::FrameBuffer).
-#include "io/exr_writer.h"
+#include "io/masks/exr_writer.h"
 
 #include <algorithm>
 #include <array>

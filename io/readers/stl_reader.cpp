@@ -1,4 +1,4 @@
-#include "io/stl_reader.h"
+#include "io/readers/stl_reader.h"
 
 #include <fcntl.h>
 #include <libdeflate.h>

@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "core/mask_image.h"
-#include "io/mask_sink.h"
+#include "io/masks/mask_sink.h"
 
 namespace toposlice {
 

@@ -1,4 +1,4 @@
-#include "io/svg_writer.h"
+#include "io/contours/svg_writer.h"
 
 #include <algorithm>
 #include <cassert>
@@ -6,8 +6,8 @@
 #include <cmath>
 #include <string_view>
 
+#include "io/contours/xml_text.h"
 #include "io/output_file.h"
-#include "io/xml_text.h"
 
 namespace toposlice {
 namespace {

@@ -23,7 +23,7 @@
 #include <string>
 #include <vector>
 
-#include "io/mask_sink.h"
+#include "io/masks/mask_sink.h"
 
 namespace toposlice {
 

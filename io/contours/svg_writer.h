@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "io/contour_sink.h"
+#include "io/contours/contour_sink.h"
 
 namespace toposlice {
 

@@ -1,4 +1,4 @@
-#include "io/stl_writer.h"
+#include "io/readers/stl_writer.h"
 
 #include <cmath>
 #include <cstring>
