@@ -1,5 +1,5 @@
 // PNG encoding for masks (PNG 1.2 spec; deflate RFC 1951; zlib stream RFC 1950), the PNG-directory sink,
-// the sink factory and StagedDirectory.
+// the sink factory.
 #include "io/masks/mask_png.h"
 
 #include <algorithm>
@@ -24,6 +24,7 @@
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
 #include "io/output_file.h"
+#include "io/staged_directory.h"
 
 namespace toposlice {
 namespace {
@@ -462,15 +463,6 @@ std::string reason(int err) {
   return std::generic_category().message(err);
 }
 
-std::atomic<uint64_t> gStagedCounter{0};
-
-std::filesystem::path siblingName(const std::filesystem::path& finalPath, const char* tag) {
-  std::filesystem::path p = finalPath;
-  p += std::string(tag) + std::to_string(::getpid()) + "-d" +
-       std::to_string(gStagedCounter.fetch_add(1, std::memory_order_relaxed));
-  return p;
-}
-
 // Writes a whole new file; `context` names the output in the error message.
 void writeNewFile(const std::filesystem::path& file, std::span<const uint8_t> data,
                   const std::filesystem::path& context) {
@@ -719,61 +711,6 @@ std::string maskLayerFileName(const std::string& name, uint32_t index, uint32_t 
   char number[16];
   std::snprintf(number, sizeof number, "%0*u", digits, index);
   return maskFilePrefix(name) + number + "." + ext;
-}
-
-// -----------------------------------------------------------------------------------------------------
-
-StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite)
-    : finalPath_(std::move(finalPath)), overwrite_(overwrite) {
-  if (!overwrite_ && outputPathExists(finalPath_)) throw OutputError(outputExistsMessage(finalPath_));
-  tempPath_ = siblingName(finalPath_, ".tmp-");
-  if (::mkdir(tempPath_.c_str(), 0777) != 0) {
-    throw OutputError(finalPath_.string() + ": cannot create " + tempPath_.string() + ": " + reason(errno));
-  }
-}
-
-StagedDirectory::~StagedDirectory() {
-  if (committed_) return;
-  std::error_code ec;
-  std::filesystem::remove_all(tempPath_, ec);
-}
-
-void StagedDirectory::commit() {
-  assert(!committed_);
-  const std::string temp = tempPath_.string(), final = finalPath_.string();
-  if (!overwrite_) {
-    if (::renameat2(AT_FDCWD, temp.c_str(), AT_FDCWD, final.c_str(), RENAME_NOREPLACE) == 0) {
-      committed_ = true;
-      return;
-    }
-    const int err = errno;
-    if (err == EEXIST || ((err == EINVAL || err == ENOSYS) && outputPathExists(finalPath_))) {
-      throw OutputError(outputExistsMessage(finalPath_));
-    }
-    if (err != EINVAL && err != ENOSYS) {
-      throw OutputError(final + ": cannot rename " + temp + ": " + reason(err));
-    }
-  }
-  if (::rename(temp.c_str(), final.c_str()) == 0) {  // no final entry yet, or an empty directory
-    committed_ = true;
-    return;
-  }
-  if (!overwrite_ || !outputPathExists(finalPath_)) {
-    throw OutputError(final + ": cannot rename " + temp + ": " + reason(errno));
-  }
-  // Replace an existing entry: move it aside, move ours in, then delete the old one.
-  const std::filesystem::path old = siblingName(finalPath_, ".old-");
-  if (::rename(final.c_str(), old.c_str()) != 0) {
-    throw OutputError(final + ": cannot replace the existing entry: " + reason(errno));
-  }
-  if (::rename(temp.c_str(), final.c_str()) != 0) {
-    const int err = errno;
-    ::rename(old.c_str(), final.c_str());
-    throw OutputError(final + ": cannot rename " + temp + ": " + reason(err));
-  }
-  committed_ = true;
-  std::error_code ec;
-  std::filesystem::remove_all(old, ec);
 }
 
 }  // namespace toposlice

@@ -1,0 +1,88 @@
+#include "io/staged_directory.h"
+
+#include <atomic>
+#include <cassert>
+#include <cerrno>
+#include <cstdint>
+#include <string>
+#include <system_error>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "io/errors.h"
+#include "io/output_file.h"
+
+namespace toposlice {
+namespace {
+
+std::string reason(int err) {
+  return std::generic_category().message(err);
+}
+
+std::atomic<uint64_t> gStagedCounter{0};
+
+std::filesystem::path siblingName(const std::filesystem::path& finalPath, const char* tag) {
+  std::filesystem::path p = finalPath;
+  p += std::string(tag) + std::to_string(::getpid()) + "-d" +
+       std::to_string(gStagedCounter.fetch_add(1, std::memory_order_relaxed));
+  return p;
+}
+
+}  // namespace
+
+StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite)
+    : finalPath_(std::move(finalPath)), overwrite_(overwrite) {
+  if (!overwrite_ && outputPathExists(finalPath_)) throw OutputError(outputExistsMessage(finalPath_));
+  tempPath_ = siblingName(finalPath_, ".tmp-");
+  if (::mkdir(tempPath_.c_str(), 0777) != 0) {
+    throw OutputError(finalPath_.string() + ": cannot create " + tempPath_.string() + ": " + reason(errno));
+  }
+}
+
+StagedDirectory::~StagedDirectory() {
+  if (committed_) return;
+  std::error_code ec;
+  std::filesystem::remove_all(tempPath_, ec);
+}
+
+void StagedDirectory::commit() {
+  assert(!committed_);
+  const std::string temp = tempPath_.string(), final = finalPath_.string();
+  if (!overwrite_) {
+    if (::renameat2(AT_FDCWD, temp.c_str(), AT_FDCWD, final.c_str(), RENAME_NOREPLACE) == 0) {
+      committed_ = true;
+      return;
+    }
+    const int err = errno;
+    if (err == EEXIST || ((err == EINVAL || err == ENOSYS) && outputPathExists(finalPath_))) {
+      throw OutputError(outputExistsMessage(finalPath_));
+    }
+    if (err != EINVAL && err != ENOSYS) {
+      throw OutputError(final + ": cannot rename " + temp + ": " + reason(err));
+    }
+  }
+  if (::rename(temp.c_str(), final.c_str()) == 0) {  // no final entry yet, or an empty directory
+    committed_ = true;
+    return;
+  }
+  if (!overwrite_ || !outputPathExists(finalPath_)) {
+    throw OutputError(final + ": cannot rename " + temp + ": " + reason(errno));
+  }
+  // Replace an existing entry: move it aside, move ours in, then delete the old one.
+  const std::filesystem::path old = siblingName(finalPath_, ".old-");
+  if (::rename(final.c_str(), old.c_str()) != 0) {
+    throw OutputError(final + ": cannot replace the existing entry: " + reason(errno));
+  }
+  if (::rename(temp.c_str(), final.c_str()) != 0) {
+    const int err = errno;
+    ::rename(old.c_str(), final.c_str());
+    throw OutputError(final + ": cannot rename " + temp + ": " + reason(err));
+  }
+  committed_ = true;
+  std::error_code ec;
+  std::filesystem::remove_all(old, ec);
+}
+
+}  // namespace toposlice

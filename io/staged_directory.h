@@ -1,0 +1,32 @@
+// StagedDirectory: the directory counterpart of OutputFile (io/output_file.h).
+#pragma once
+
+#include <filesystem>
+
+namespace toposlice {
+
+// A directory that appears under its final name complete or not at all: the directory counterpart of
+// OutputFile (io/output_file.h), used by the PNG and EXR sinks. It is created as
+// "<final>.tmp-<pid>-<n>" beside the final path; commit() renames it into place (without overwrite,
+// atomically refusing an existing final path; with it, the old entry is moved aside, replaced, then
+// deleted); destroyed uncommitted, it is removed with everything in it. It is not in OutputFile's
+// signal-handler table: a process killed by a signal may leave the temporary directory behind.
+class StagedDirectory {
+ public:
+  StagedDirectory(std::filesystem::path finalPath, bool overwrite);  // throws OutputError
+  ~StagedDirectory();                                                // never throws
+  StagedDirectory(const StagedDirectory&) = delete;
+  StagedDirectory& operator=(const StagedDirectory&) = delete;
+
+  void commit();  // throws OutputError; call at most once
+  const std::filesystem::path& finalPath() const { return finalPath_; }
+  const std::filesystem::path& tempPath() const { return tempPath_; }
+
+ private:
+  std::filesystem::path finalPath_;
+  std::filesystem::path tempPath_;
+  bool overwrite_;
+  bool committed_ = false;
+};
+
+}  // namespace toposlice
