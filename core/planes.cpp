@@ -1,5 +1,7 @@
 #include "core/planes.h"
 
+#include <cerrno>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -12,11 +14,15 @@ std::vector<double> makePlanes(const PlaneSpec& spec, double zmin, double zmax, 
   if (!spec.explicitZ.empty()) {
     for (std::size_t i = 0; i < spec.explicitZ.size(); ++i) {
       if (!std::isfinite(spec.explicitZ[i])) {
-        error = "plane z value " + std::to_string(i) + " is not a finite number";
+        error = "z value number " + std::to_string(i + 1) + " is not a finite number";
         return {};
       }
       if (i > 0 && !(spec.explicitZ[i - 1] < spec.explicitZ[i])) {
-        error = "explicit plane z values must be strictly increasing (value " + std::to_string(i) + ")";
+        std::ostringstream text;
+        text.precision(17);
+        text << "explicit plane z values must be strictly increasing (" << spec.explicitZ[i - 1] << " then "
+             << spec.explicitZ[i] << ")";
+        error = text.str();
         return {};
       }
     }
@@ -35,7 +41,22 @@ std::vector<double> makePlanes(const PlaneSpec& spec, double zmin, double zmax, 
       error = "layer height must be a positive number of millimetres";
       return {};
     }
-    count = spec.layers ? *spec.layers : static_cast<uint64_t>(std::max(0.0, std::ceil((zmax - z0) / h)));
+    const double wanted =
+        spec.layers ? static_cast<double>(*spec.layers) : std::max(0.0, std::ceil((zmax - z0) / h));
+    if (!(wanted <= 1e12)) {  // checked before the conversion, which would overflow
+      std::ostringstream text;
+      text << "layer height " << h << " mm gives too many layers (" << wanted << ")";
+      error = text.str();
+      return {};
+    }
+    count = static_cast<uint64_t>(wanted);
+    if (count == 0) {
+      std::ostringstream text;
+      text.precision(10);
+      text << "z0 " << z0 << " mm is at or above the model's top (z " << zmax << " mm): no layer to slice";
+      error = text.str();
+      return {};
+    }
   } else if (spec.layers) {
     if (*spec.layers == 0) {
       error = "the layer count must be at least 1";
@@ -61,18 +82,48 @@ std::vector<double> makePlanes(const PlaneSpec& spec, double zmin, double zmax, 
   return planes;
 }
 
-bool parseZList(const std::string& text, std::vector<double>& out) {
+bool parseZList(const std::string& text, std::vector<double>& out, std::string* error) {
   out.clear();
-  std::string cleaned = text;
-  std::replace(cleaned.begin(), cleaned.end(), ',', ' ');
-  std::istringstream in(cleaned);
-  std::string token;
-  while (in >> token) {
-    char* end = nullptr;
-    const double v = std::strtod(token.c_str(), &end);
-    if (end == token.c_str() || *end != '\0') return false;
+  auto fail = [&](const std::string& why) {
+    if (error) *error = why;
+    return false;
+  };
+  // Values are separated by commas and/or whitespace; two commas with nothing between them, or a comma
+  // at either end, leave a value out: an error rather than a silently shorter list.
+  std::size_t i = 0;
+  bool expectValue = true;  // at the start, or just after a comma
+  std::size_t position = 0;
+  while (i < text.size()) {
+    const char c = text[i];
+    if (c == ' ' || c == '\t') {
+      ++i;
+      continue;
+    }
+    if (c == ',') {
+      if (expectValue)
+        return fail("value " + std::to_string(position + 1) + " is missing (empty between commas)");
+      expectValue = true;
+      ++i;
+      continue;
+    }
+    std::size_t end = i;
+    while (end < text.size() && text[end] != ',' && text[end] != ' ' && text[end] != '\t') ++end;
+    const std::string token = text.substr(i, end - i);
+    char* stop = nullptr;
+    errno = 0;
+    const double v = std::strtod(token.c_str(), &stop);
+    if (stop == token.c_str() || *stop != '\0') return fail("'" + token + "' is not a number");
+    if (!std::isfinite(v) || errno == ERANGE) {
+      if (!(std::isfinite(v) && v == 0 && errno == ERANGE))
+        return fail("'" + token + "' is not a finite number");
+    }
     out.push_back(v);
+    ++position;
+    expectValue = false;
+    i = end;
   }
+  if (out.empty()) return fail("no values");
+  if (expectValue) return fail("a value is missing after the last comma");
   return true;
 }
 

@@ -23,6 +23,6 @@ struct PlaneSpec {
 std::vector<double> makePlanes(const PlaneSpec& spec, double zmin, double zmax, std::string& error);
 
 // Parses "0.1,0.2,0.35" (commas or whitespace) into values; returns false on malformed text.
-bool parseZList(const std::string& text, std::vector<double>& out);
+bool parseZList(const std::string& text, std::vector<double>& out, std::string* error = nullptr);
 
 }  // namespace toposlice

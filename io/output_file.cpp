@@ -2,6 +2,7 @@
 
 #include <atomic>
 #include <cassert>
+#include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -28,7 +29,55 @@ static_assert(std::atomic<int>::is_always_lock_free, "the signal handler needs l
 PendingSlot gPending[kMaxPendingOutputs];
 std::atomic<std::uint64_t> gTempCounter{0};
 
-int registerPending(const std::string& path) {
+thread_local OutputTransaction* tCurrentTransaction = nullptr;
+
+std::string lowerExtension(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
+}
+
+std::filesystem::path asideName(const std::filesystem::path& finalPath) {
+  static std::atomic<std::uint64_t> counter{0};
+  std::filesystem::path p = finalPath;
+  p += ".old-" + std::to_string(::getpid()) + "-" +
+       std::to_string(counter.fetch_add(1, std::memory_order_relaxed));
+  return p;
+}
+
+// Renames without replacing anything: renameat2 RENAME_NOREPLACE, or, on file systems without it, a
+// check then rename (not atomic there). Returns 0 or an errno value (EEXIST when the target exists).
+int renameNoReplace(const std::string& from, const std::string& to) {
+  if (::renameat2(AT_FDCWD, from.c_str(), AT_FDCWD, to.c_str(), RENAME_NOREPLACE) == 0) return 0;
+  if (errno != EINVAL && errno != ENOSYS) return errno;
+  if (outputPathExists(to)) return EEXIST;
+  return ::rename(from.c_str(), to.c_str()) == 0 ? 0 : errno;
+}
+
+// The first bytes a file of this extension starts with when toposlice wrote it; empty: not checked.
+std::vector<std::string_view> signaturesFor(const std::string& ext) {
+  using namespace std::string_view_literals;
+  if (ext == ".cli") return {"$$HEADERSTART"sv};
+  if (ext == ".svg") return {"<?xml"sv, "<svg"sv};
+  if (ext == ".3mf" || ext == ".sl1" || ext == ".sl1s") return {"PK\x03\x04"sv};
+  if (ext == ".vdb") return {" BDV"sv};
+  if (ext == ".topo") return {"TOPOSLC"sv};
+  if (ext == ".csv") return {"layer,"sv};
+  if (ext == ".json") return {"{"sv};
+  return {};
+}
+
+bool isLayerFileName(const std::string& name, std::string_view ext) {
+  if (name.size() <= ext.size() + 1) return false;
+  const std::size_t dot = name.size() - ext.size();
+  for (std::size_t i = 0; i < ext.size(); ++i)
+    if (std::tolower(static_cast<unsigned char>(name[dot + i])) != ext[i]) return false;
+  return std::isdigit(static_cast<unsigned char>(name[dot - 1])) != 0;
+}
+
+}  // namespace
+
+int registerPendingOutput(const std::string& path) noexcept {
   if (path.size() + 1 > kSlotPathSize) return -1;
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
     int expected = 0;
@@ -41,11 +90,13 @@ int registerPending(const std::string& path) {
   return -1;  // table full: the file works, it is just not removed on a signal
 }
 
-void unregisterPending(int slot) {
+void unregisterPendingOutput(int slot) noexcept {
   if (slot < 0) return;
   gPending[slot].state.store(1, std::memory_order_relaxed);
   gPending[slot].state.store(0, std::memory_order_release);
 }
+
+namespace {
 
 std::string reason(int err) {
   return std::generic_category().message(err);
@@ -71,7 +122,11 @@ void removePendingOutputs() noexcept {
 
 OutputFile::OutputFile(std::filesystem::path finalPath, bool overwrite)
     : finalPath_(std::move(finalPath)), overwrite_(overwrite) {
-  if (!overwrite_ && outputPathExists(finalPath_)) throw OutputError(outputExistsMessage(finalPath_));
+  if (outputPathExists(finalPath_)) {
+    if (!overwrite_) throw OutputError(outputExistsMessage(finalPath_));
+    checkReplaceable(finalPath_, OutputKind::File);
+  }
+  transaction_ = OutputTransaction::current();
   const std::uint64_t counter = gTempCounter.fetch_add(1, std::memory_order_relaxed);
   tempPath_ = finalPath_;
   tempPath_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter);
@@ -81,12 +136,12 @@ OutputFile::OutputFile(std::filesystem::path finalPath, bool overwrite)
   // absolute, so that a later change of the working directory does not matter.
   std::error_code ec;
   const std::filesystem::path absolute = std::filesystem::absolute(tempPath_, ec);
-  registrySlot_ = registerPending(ec ? temp : absolute.string());
+  registrySlot_ = registerPendingOutput(ec ? temp : absolute.string());
   fd_ = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
   if (fd_ < 0) {
     const int err = errno;
-    unregisterPending(registrySlot_);
-    throw OutputError(finalPath_.string() + ": cannot create " + temp + ": " + reason(err));
+    unregisterPendingOutput(registrySlot_);
+    throw OutputError(cannotCreateMessage(finalPath_, err));
   }
 }
 
@@ -94,7 +149,7 @@ OutputFile::~OutputFile() {
   if (committed_) return;
   if (fd_ >= 0) ::close(fd_);
   ::unlink(tempPath_.c_str());
-  unregisterPending(registrySlot_);
+  unregisterPendingOutput(registrySlot_);
 }
 
 void OutputFile::fail(const char* what, int err) {
@@ -148,26 +203,175 @@ void OutputFile::commit() {
   const int fd = fd_;
   fd_ = -1;
   if (::close(fd) != 0) fail("cannot write", errno);
+  if (transaction_ != nullptr) {
+    transaction_->stage({tempPath_, finalPath_, overwrite_, OutputKind::File, {}, registrySlot_});
+    registrySlot_ = -1;
+    committed_ = true;
+    return;
+  }
   const std::string temp = tempPath_.string();
   const std::string final = finalPath_.string();
   bool renamed = false;
   if (!overwrite_) {
-    if (::renameat2(AT_FDCWD, temp.c_str(), AT_FDCWD, final.c_str(), RENAME_NOREPLACE) == 0) {
-      renamed = true;
-    } else if (errno == EEXIST) {
-      failed_ = true;
-      throw OutputError(outputExistsMessage(finalPath_));
-    } else if (errno != EINVAL && errno != ENOSYS) {
-      fail("cannot rename the temporary file", errno);
-    } else if (outputPathExists(finalPath_)) {  // file system without RENAME_NOREPLACE
+    const int err = renameNoReplace(temp, final);
+    if (err == EEXIST) {
       failed_ = true;
       throw OutputError(outputExistsMessage(finalPath_));
     }
+    if (err != 0) fail("cannot rename the temporary file", err);
+    renamed = true;
+  } else if (outputPathExists(finalPath_)) {
+    failed_ = true;
+    checkReplaceable(finalPath_, OutputKind::File);
+    failed_ = false;
   }
   if (!renamed && ::rename(temp.c_str(), final.c_str()) != 0) fail("cannot rename the temporary file", errno);
   committed_ = true;
-  unregisterPending(registrySlot_);
+  unregisterPendingOutput(registrySlot_);
   registrySlot_ = -1;
+}
+
+std::string cannotCreateMessage(const std::filesystem::path& path, int err) {
+  std::filesystem::path folder = path.parent_path();
+  if (folder.empty()) folder = ".";
+  if (err == ENOENT || err == ENOTDIR) {
+    std::error_code ec;
+    const auto st = std::filesystem::status(folder, ec);
+    if (st.type() == std::filesystem::file_type::not_found)
+      return path.string() + ": cannot create: folder '" + folder.string() + "' does not exist";
+    if (st.type() != std::filesystem::file_type::directory)
+      return path.string() + ": cannot create: '" + folder.string() + "' is not a folder";
+  }
+  if (err == EACCES || err == EPERM)
+    return path.string() + ": cannot create: no permission to write in folder '" + folder.string() + "'";
+  return path.string() + ": cannot create: " + reason(err);
+}
+
+void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::symlink_status(path, ec);
+  if (ec || st.type() == fs::file_type::not_found) return;
+  // A link is replaced, never followed: what it points to stays as it is.
+  if (st.type() == fs::file_type::symlink) return;
+  const std::string refused = ", even with --force";
+  if (kind == OutputKind::File) {
+    if (st.type() == fs::file_type::directory)
+      throw OutputError(path.string() +
+                        ": is a folder; toposlice writes a file there and never replaces a folder" + refused);
+    if (st.type() != fs::file_type::regular)
+      throw OutputError(path.string() + ": is not a regular file; not replaced" + refused);
+    const std::vector<std::string_view> signatures = signaturesFor(lowerExtension(path));
+    if (signatures.empty()) return;
+    char head[16] = {};
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw OutputError(path.string() + ": cannot read the existing file: " + reason(errno));
+    const ssize_t n = ::read(fd, head, sizeof head);
+    ::close(fd);
+    if (n == 0) return;  // an empty file holds nothing to lose
+    std::string_view start(head, n > 0 ? static_cast<std::size_t>(n) : 0);
+    const std::size_t first = start.find_first_not_of(" \t\r\n");
+    for (const std::string_view sig : signatures) {
+      if (start.starts_with(sig)) return;
+      if (sig == "{" && first != std::string_view::npos && start[first] == '{') return;
+    }
+    throw OutputError(path.string() + ": exists and is not a " + lowerExtension(path).substr(1) +
+                      " file toposlice wrote (its first bytes differ); not replaced" + refused);
+  }
+  if (st.type() != fs::file_type::directory)
+    throw OutputError(path.string() + ": exists and is not a folder of layers toposlice wrote; not replaced" +
+                      refused);
+  std::string ext(layerExt);
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  for (const fs::directory_entry& entry : fs::directory_iterator(path, ec)) {
+    const std::string name = entry.path().filename().string();
+    const fs::file_status es = entry.symlink_status(ec);
+    if (es.type() == fs::file_type::directory)
+      throw OutputError(path.string() + ": holds the folder '" + name +
+                        "', which toposlice did not write; the folder is not replaced" + refused);
+    if (es.type() != fs::file_type::regular || !isLayerFileName(name, ext))
+      throw OutputError(path.string() + ": holds '" + name +
+                        "', which toposlice did not write; the folder is not replaced" + refused);
+  }
+  if (ec) throw OutputError(path.string() + ": cannot list the existing folder: " + ec.message());
+}
+
+// -----------------------------------------------------------------------------------------------------
+
+OutputTransaction::OutputTransaction() : previous_(tCurrentTransaction) {
+  tCurrentTransaction = this;
+}
+
+OutputTransaction::~OutputTransaction() {
+  if (tCurrentTransaction == this) tCurrentTransaction = previous_;
+  for (const Staged& s : staged_) {
+    std::error_code ec;
+    if (s.kind == OutputKind::File) {
+      ::unlink(s.temp.c_str());
+    } else {
+      std::filesystem::remove_all(s.temp, ec);
+    }
+    unregisterPendingOutput(s.registrySlot);
+  }
+}
+
+OutputTransaction* OutputTransaction::current() {
+  return tCurrentTransaction;
+}
+
+void OutputTransaction::stage(Staged staged) {
+  staged_.push_back(std::move(staged));
+}
+
+void OutputTransaction::commit(const std::atomic<bool>* cancel) {
+  assert(!done_);
+  if (cancel != nullptr && cancel->load()) throw OutputError("interrupted");
+  struct Aside {
+    std::filesystem::path final, aside;
+  };
+  std::vector<Aside> asides;
+  auto restoreAsides = [&] {
+    for (auto it = asides.rbegin(); it != asides.rend(); ++it) ::rename(it->aside.c_str(), it->final.c_str());
+  };
+  for (const Staged& s : staged_) {
+    if (!outputPathExists(s.final)) continue;
+    if (!s.overwrite) {
+      restoreAsides();
+      throw OutputError(outputExistsMessage(s.final));
+    }
+    try {
+      checkReplaceable(s.final, s.kind, s.layerExt);
+    } catch (...) {
+      restoreAsides();
+      throw;
+    }
+    const std::filesystem::path aside = asideName(s.final);
+    if (::rename(s.final.c_str(), aside.c_str()) != 0) {
+      const int err = errno;
+      restoreAsides();
+      throw OutputError(s.final.string() + ": cannot replace the existing entry: " + reason(err));
+    }
+    asides.push_back({s.final, aside});
+  }
+  for (std::size_t i = 0; i < staged_.size(); ++i) {
+    const int err = renameNoReplace(staged_[i].temp.string(), staged_[i].final.string());
+    if (err == 0) continue;
+    for (std::size_t j = i; j-- > 0;) ::rename(staged_[j].final.c_str(), staged_[j].temp.c_str());
+    restoreAsides();
+    if (err == EEXIST) throw OutputError(outputExistsMessage(staged_[i].final));
+    throw OutputError(staged_[i].final.string() + ": cannot rename the temporary " +
+                      staged_[i].temp.string() + ": " + reason(err));
+  }
+  done_ = true;
+  for (const Aside& a : asides) {
+    std::error_code ec;
+    std::filesystem::remove_all(a.aside, ec);
+  }
+  for (Staged& s : staged_) {
+    unregisterPendingOutput(s.registrySlot);
+    committedPaths_.push_back(s.final);
+  }
+  staged_.clear();
 }
 
 }  // namespace toposlice

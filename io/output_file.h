@@ -10,6 +10,15 @@
 // Durability: commit() does not fsync; it protects against interruption and failed writes, not against
 // a power loss right after the rename.
 //
+// Transactions: an OutputFile created on a thread while an OutputTransaction is current there joins it.
+// Its commit() then writes out and closes the temporary but does not rename it: the transaction renames
+// all of its outputs together at its own commit(), or removes every temporary when it is destroyed
+// uncommitted, so a job's outputs appear together or not at all.
+//
+// Replacing (overwrite): only what toposlice writes is replaced. An existing final path that is a
+// folder, or a file whose first bytes are not those of the format its extension names (see
+// checkReplaceable), is refused even with overwrite.
+//
 // Signals: every live temporary is also listed in a fixed, process-wide table of C strings (at most
 // kMaxPendingOutputs at once; a further one still works, it is just not listed). A SIGINT/SIGTERM
 // handler calls removePendingOutputs(), which only reads that table and calls unlink(2), so an
@@ -17,11 +26,14 @@
 //     void onSignal(int sig) { removePendingOutputs(); signal(sig, SIG_DFL); raise(sig); }
 #pragma once
 
+#include <atomic>
 #include <cstddef>
 #include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <string_view>
+#include <vector>
 
 namespace toposlice {
 
@@ -41,8 +53,9 @@ class OutputFile {
   // the file can only be abandoned. Not allowed after commit().
   void write(const void* data, std::size_t size);
 
-  // Writes out the buffer, closes and renames the temporary to the final path. Throws OutputError on
-  // failure (the temporary is then removed by the destructor). Call at most once.
+  // Writes out the buffer, closes and renames the temporary to the final path (or, in a transaction,
+  // hands the closed temporary to it). Throws OutputError on failure (the temporary is then removed by
+  // the destructor). Call at most once.
   void commit();
 
   const std::filesystem::path& finalPath() const { return finalPath_; }
@@ -58,6 +71,7 @@ class OutputFile {
   std::filesystem::path finalPath_;
   std::filesystem::path tempPath_;
   bool overwrite_;
+  class OutputTransaction* transaction_ = nullptr;
   int fd_ = -1;
   int registrySlot_ = -1;
   bool committed_ = false;
@@ -80,5 +94,68 @@ bool outputPathExists(const std::filesystem::path& path);
 
 // "<path>: already exists (use --force to overwrite)", the one message for a refused output.
 std::string outputExistsMessage(const std::filesystem::path& path);
+
+// The reason a file or folder cannot be created at `path`, naming the folder rather than a temporary:
+// "<path>: cannot create: folder 'out' does not exist" (ENOENT), "...: no permission to write in folder
+// 'out'" (EACCES/EPERM), or "<path>: cannot create: <strerror>".
+std::string cannotCreateMessage(const std::filesystem::path& path, int err);
+
+// What an output is, for the overwrite check.
+enum class OutputKind { File, LayerFolder };
+
+// Throws OutputError unless the existing entry at `path` may be replaced by a toposlice output of that
+// kind: a File output replaces a regular file (or a link) whose first bytes match the format of its
+// extension (.cli, .svg, .3mf, .sl1, .sl1s, .vdb, .topo, .csv, .json; any empty file; a file of another
+// extension is not checked); a LayerFolder output replaces a folder holding only regular files named
+// <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png", ".exr"). The message
+// names one entry toposlice would not have written. A missing path is fine.
+void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
+
+// A group of outputs that appear together or not at all (see the transactions paragraph above). While
+// an OutputTransaction is alive it is the calling thread's current one (a later one nests inside it and
+// restores it when destroyed). Not copyable or movable.
+class OutputTransaction {
+ public:
+  OutputTransaction();
+  ~OutputTransaction();  // not committed: removes every temporary handed to it; never throws
+  OutputTransaction(const OutputTransaction&) = delete;
+  OutputTransaction& operator=(const OutputTransaction&) = delete;
+
+  // The calling thread's current transaction, or null.
+  static OutputTransaction* current();
+
+  // Moves every staged output under its final name. First every replaced entry is checked
+  // (checkReplaceable) and moved aside, then each temporary is renamed into place (without overwrite,
+  // refusing an existing final path atomically); any failure undoes the renames done so far and puts the
+  // moved entries back, then throws OutputError: nothing of the transaction is left. Only then are the
+  // old entries deleted. `cancel`, when given and set before the first rename, makes it throw instead
+  // (an interrupted job commits nothing). Call at most once.
+  void commit(const std::atomic<bool>* cancel = nullptr);
+
+  // Final paths of the outputs committed (after commit()).
+  const std::vector<std::filesystem::path>& committed() const { return committedPaths_; }
+
+  // Used by OutputFile and StagedDirectory: takes over a closed temporary (file or folder) that is to
+  // become `finalPath`. `registrySlot` is the temporary's entry in the signal table (-1: none); the
+  // transaction releases it.
+  struct Staged {
+    std::filesystem::path temp, final;
+    bool overwrite = false;
+    OutputKind kind = OutputKind::File;
+    std::string layerExt;
+    int registrySlot = -1;
+  };
+  void stage(Staged staged);
+
+ private:
+  std::vector<Staged> staged_;
+  std::vector<std::filesystem::path> committedPaths_;
+  OutputTransaction* previous_ = nullptr;
+  bool done_ = false;
+};
+
+// Registers a temporary path in the signal table (see above); returns the slot or -1. Releases one.
+int registerPendingOutput(const std::string& path) noexcept;
+void unregisterPendingOutput(int slot) noexcept;
 
 }  // namespace toposlice

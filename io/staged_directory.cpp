@@ -32,13 +32,15 @@ std::filesystem::path siblingName(const std::filesystem::path& finalPath, const 
 
 }  // namespace
 
-StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite)
-    : finalPath_(std::move(finalPath)), overwrite_(overwrite) {
-  if (!overwrite_ && outputPathExists(finalPath_)) throw OutputError(outputExistsMessage(finalPath_));
-  tempPath_ = siblingName(finalPath_, ".tmp-");
-  if (::mkdir(tempPath_.c_str(), 0777) != 0) {
-    throw OutputError(finalPath_.string() + ": cannot create " + tempPath_.string() + ": " + reason(errno));
+StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite, std::string layerExt)
+    : finalPath_(std::move(finalPath)), overwrite_(overwrite), layerExt_(std::move(layerExt)) {
+  if (outputPathExists(finalPath_)) {
+    if (!overwrite_) throw OutputError(outputExistsMessage(finalPath_));
+    checkReplaceable(finalPath_, OutputKind::LayerFolder, layerExt_);
   }
+  transaction_ = OutputTransaction::current();
+  tempPath_ = siblingName(finalPath_, ".tmp-");
+  if (::mkdir(tempPath_.c_str(), 0777) != 0) throw OutputError(cannotCreateMessage(finalPath_, errno));
 }
 
 StagedDirectory::~StagedDirectory() {
@@ -49,6 +51,11 @@ StagedDirectory::~StagedDirectory() {
 
 void StagedDirectory::commit() {
   assert(!committed_);
+  if (transaction_ != nullptr) {
+    transaction_->stage({tempPath_, finalPath_, overwrite_, OutputKind::LayerFolder, layerExt_, -1});
+    committed_ = true;
+    return;
+  }
   const std::string temp = tempPath_.string(), final = finalPath_.string();
   if (!overwrite_) {
     if (::renameat2(AT_FDCWD, temp.c_str(), AT_FDCWD, final.c_str(), RENAME_NOREPLACE) == 0) {
@@ -71,6 +78,7 @@ void StagedDirectory::commit() {
     throw OutputError(final + ": cannot rename " + temp + ": " + reason(errno));
   }
   // Replace an existing entry: move it aside, move ours in, then delete the old one.
+  checkReplaceable(finalPath_, OutputKind::LayerFolder, layerExt_);
   const std::filesystem::path old = siblingName(finalPath_, ".old-");
   if (::rename(final.c_str(), old.c_str()) != 0) {
     throw OutputError(final + ": cannot replace the existing entry: " + reason(errno));

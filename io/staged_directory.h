@@ -2,6 +2,7 @@
 #pragma once
 
 #include <filesystem>
+#include <string>
 
 namespace toposlice {
 
@@ -9,12 +10,18 @@ namespace toposlice {
 // OutputFile (io/output_file.h), used by the PNG and EXR sinks. It is created as
 // "<final>.tmp-<pid>-<n>" beside the final path; commit() renames it into place (without overwrite,
 // atomically refusing an existing final path; with it, the old entry is moved aside, replaced, then
-// deleted); destroyed uncommitted, it is removed with everything in it. It is not in OutputFile's
-// signal-handler table: a process killed by a signal may leave the temporary directory behind.
+// deleted); destroyed uncommitted, it is removed with everything in it. With overwrite, only a folder of
+// layer files (<anything><digits><layerExt>) is replaced: checkReplaceable (io/output_file.h) refuses any
+// other existing entry, when the directory is created and again at commit. Created while an
+// OutputTransaction is current, commit() hands the folder to it instead of renaming. It is not in
+// OutputFile's signal-handler table: a process killed by a second signal may leave the temporary
+// directory behind.
 class StagedDirectory {
  public:
-  StagedDirectory(std::filesystem::path finalPath, bool overwrite);  // throws OutputError
-  ~StagedDirectory();                                                // never throws
+  // layerExt: the extension of the layer files it holds (".png", ".exr").
+  StagedDirectory(std::filesystem::path finalPath, bool overwrite,
+                  std::string layerExt);  // throws OutputError
+  ~StagedDirectory();                     // never throws
   StagedDirectory(const StagedDirectory&) = delete;
   StagedDirectory& operator=(const StagedDirectory&) = delete;
 
@@ -26,6 +33,8 @@ class StagedDirectory {
   std::filesystem::path finalPath_;
   std::filesystem::path tempPath_;
   bool overwrite_;
+  std::string layerExt_;
+  class OutputTransaction* transaction_ = nullptr;
   bool committed_ = false;
 };
 

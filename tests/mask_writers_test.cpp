@@ -1021,20 +1021,30 @@ TEST_F(MaskStaging, InterruptedWritesLeaveNothing) {
 TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
   const MaskJob job = smallJob(16, 16, 1, false);
   const MaskImage m = discMask(16, 16, 8, 8, 5, false);
+  // What an earlier toposlice run left: an archive or grid file that starts as its format does, or a
+  // folder of layer files. Only such outputs are replaced, and only with overwrite.
+  auto makeOld = [](const fs::path& out) {
+    const std::string ext = out.extension().string();
+    if (ext.empty() || ext == ".exr") {
+      fs::create_directory(out);
+      std::ofstream(out / (ext.empty() ? "old00000.png" : "old00000.exr")) << "old";
+    } else {
+      std::ofstream(out) << (ext == ".vdb" ? " BDVold" : "PK\x03\x04old");
+    }
+  };
   for (size_t n = 0; n < std::size(kOutputs); ++n) {
     const char* name = kOutputs[n];
     const fs::path out = dir_ / name;
-    {
-      std::ofstream old(out);
-      old << "old";
-    }
+    makeOld(out);
+    const auto before = fs::is_directory(out) ? std::uintmax_t{0} : fs::file_size(out);
     EXPECT_THROW(makeMaskSink(out, job, false), OutputError) << name;
-    EXPECT_EQ(fs::file_size(out), 3u) << name;
+    EXPECT_EQ(fs::is_directory(out) ? std::uintmax_t{0} : fs::file_size(out), before) << name;
     auto sink = makeMaskSink(out, job, true);
     sink->writeLayer(0, 0.0125, m, {});
     sink->finish(job);
     EXPECT_TRUE(fs::exists(out)) << name;
-    EXPECT_FALSE(fs::is_regular_file(out) && fs::file_size(out) == 3u) << name << " was not replaced";
+    EXPECT_FALSE(fs::exists(out / "old00000.png") || fs::exists(out / "old00000.exr")) << name;
+    EXPECT_FALSE(fs::is_regular_file(out) && fs::file_size(out) == before) << name << " was not replaced";
     EXPECT_EQ(strayEntries(out).size(), n) << name;  // the outputs of the previous rounds
   }
   // A second run over directory outputs replaces them too.
@@ -1042,6 +1052,36 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
   sink->writeLayer(0, 0.0125, m, {});
   sink->finish(job);
   EXPECT_TRUE(fs::is_regular_file(dir_ / "stack" / "part00000.png"));
+}
+
+// Overwrite replaces only what toposlice writes: a folder holding anything but layer files, a file at a
+// folder output's path, or a file of another format is refused, and left exactly as it was.
+TEST_F(MaskStaging, OverwriteNeverReplacesForeignContent) {
+  const MaskJob job = smallJob(16, 16, 1, false);
+  fs::create_directory(dir_ / "stack");
+  std::ofstream(dir_ / "stack" / "part00000.png") << "png";
+  std::ofstream(dir_ / "stack" / "notes.txt") << "mine";
+  fs::create_directory(dir_ / "stack2");
+  fs::create_directory(dir_ / "stack2" / "sub");
+  std::ofstream(dir_ / "plain") << "a file where a folder would go";
+  std::ofstream(dir_ / "part.sl1") << "not a zip";
+  std::ofstream(dir_ / "part.vdb") << "not a grid";
+  const std::pair<const char*, const char*> cases[] = {{"stack", "notes.txt"},
+                                                       {"stack2", "sub"},
+                                                       {"plain", "not a folder"},
+                                                       {"part.sl1", "not a sl1"},
+                                                       {"part.vdb", "not a vdb"}};
+  for (const auto& [name, named] : cases) {
+    try {
+      makeMaskSink(dir_ / name, job, true);
+      ADD_FAILURE() << name << ": replaced";
+    } catch (const OutputError& e) {
+      EXPECT_NE(std::string(e.what()).find(named), std::string::npos) << e.what();
+    }
+  }
+  EXPECT_TRUE(fs::exists(dir_ / "stack" / "notes.txt"));
+  EXPECT_TRUE(fs::exists(dir_ / "stack2" / "sub"));
+  EXPECT_EQ(fs::file_size(dir_ / "part.sl1"), 9u);
 }
 
 TEST_F(MaskStaging, OutputCreatedMeanwhileIsNotReplaced) {

@@ -614,15 +614,15 @@ TEST(ThreeMfWriter, NothingUnderFinalNameBeforeFinish) {
 TEST(ThreeMfWriter, ExistingFileNeedsOverwrite) {
   ScratchDir dir;
   const fs::path out = dir / "old.3mf";
-  std::ofstream(out) << "keep me";
+  std::ofstream(out) << "PK\x03\x04 an older 3MF";
   const FacetSoup box = boxSoup(0.3f);
   EXPECT_THROW(makeThreeMfWriter(out, boxJob(1, 0.3f), &box, false, 0.3), OutputError);
-  EXPECT_EQ(readFile(out), "keep me");
+  EXPECT_EQ(readFile(out), "PK\x03\x04 an older 3MF");
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"old.3mf"});
 
   auto sink = makeThreeMfWriter(out, boxJob(1, 0.3f), &box, true, 0.3);
   sink->writeLayer(0, squareWithHole(0.15));
-  EXPECT_EQ(readFile(out), "keep me");  // untouched until finish()
+  EXPECT_EQ(readFile(out), "PK\x03\x04 an older 3MF");  // untouched until finish()
   sink->finish();
   const ReadModel m = readWithLib3mf(out);
   ASSERT_TRUE(m.ok) << std::hex << m.readError << " " << m.readMessage;

@@ -2,10 +2,12 @@
 // Every failure prints one line "toposlice: error: <reason>" to stderr and exits non-zero.
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "core/mesh_info.h"
 #include "core/planes.h"
@@ -25,6 +27,10 @@ namespace {
 
 volatile std::sig_atomic_t gSignal = 0;
 
+// What an interrupted command says it left: slice and template commit their outputs together or not at
+// all; a batch keeps the variants it completed before the signal.
+const char* gInterruptedMessage = "interrupted; no output was left behind";
+
 // First SIGINT/SIGTERM: ask the running job to stop at the next band; it unwinds, every temporary
 // (files and staged folders) is removed by its owner, and run() then dies by the same signal. A second
 // signal stops at once, removing the temporary files it can from the handler.
@@ -42,9 +48,25 @@ extern "C" void onSignal(int signal) {
 // After an interrupted command has cleaned up: end by the signal, as the shell expects.
 void endIfInterrupted() {
   if (gSignal == 0) return;
-  std::fprintf(stderr, "toposlice: interrupted; no output was left behind\n");
+  std::fprintf(stderr, "toposlice: %s\n", gInterruptedMessage);
   std::signal(gSignal, SIG_DFL);
   std::raise(gSignal);
+}
+
+// Levenshtein distance, for "did you mean" on a mistyped command.
+std::size_t editDistance(const std::string& a, const std::string& b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = up;
+    }
+  }
+  return row[b.size()];
 }
 
 struct CommonOptions {
@@ -81,8 +103,8 @@ void addPlaneOptions(CLI::App* app, PlaneOptions& p) {
 PlaneSpec planeSpec(const PlaneOptions& p) {
   PlaneSpec spec;
   if (!p.zList.empty()) {
-    if (!parseZList(p.zList, spec.explicitZ))
-      throw InputError("--z '" + p.zList + "': not a list of numbers");
+    std::string error;
+    if (!parseZList(p.zList, spec.explicitZ, &error)) throw InputError("--z '" + p.zList + "': " + error);
     return spec;
   }
   if (*p.heightOpt) spec.layerHeight = p.layerHeight;
@@ -129,6 +151,10 @@ int runInfo(const std::string& model) {
   return 0;
 }
 
+void printWarnings(const std::vector<std::string>& warnings) {
+  for (const auto& w : warnings) std::fprintf(stderr, "toposlice: warning: %s\n", w.c_str());
+}
+
 void printSliceSummary(const std::string& model, const SliceJobOptions& options, const SliceJobResult& r) {
   std::printf("model      : %s, %llu facets\n", model.c_str(), static_cast<unsigned long long>(r.facets));
   std::printf("method     : %s; topology %s\n", sliceMethodName(options.slice.method), r.topology.c_str());
@@ -167,21 +193,34 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
 }
 
 int runSlice(const std::string& model, const SliceJobOptions& options, const CommonOptions& common) {
-  ProgressBar bar("slicing", common.quiet);
-  ProgressContext progress;
-  progress.report = [&](uint64_t done, uint64_t total) { bar.update(done, total); };
-  const SliceJobResult result = runSliceJob(model, options, &progress);
-  bar.update(result.stats.layers, result.stats.layers);
+  SliceJobResult result;
+  {
+    ProgressBar bar("slicing", common.quiet);
+    ProgressContext progress;
+    progress.report = [&](uint64_t done, uint64_t total) { bar.update(done, total); };
+    result = runSliceJob(model, options, &progress);
+    bar.update(result.stats.layers, result.stats.layers);
+  }  // the bar's line ends here, before anything else is printed
   if (!common.quiet) printSliceSummary(model, options, result);
+  printWarnings(result.warnings);  // never hidden by --quiet
+  if (result.written.empty())
+    std::fprintf(stderr,
+                 "toposlice: warning: nothing was written: no output was asked for (-o, --masks, --report or "
+                 "--summary)\n");
   return 0;
 }
 
 int runTemplate(const std::string& model, const std::string& output, bool force, bool quiet) {
   const auto start = std::chrono::steady_clock::now();
+  checkNotAnInput(output, {model});
+  // The table is written in a transaction that commits only when no stop signal has come: an
+  // interrupted run leaves no table, a finished one a complete table.
+  OutputTransaction transaction;
   const FacetSoup soup = readStl(model);
   const IndexedMesh mesh = weldCorners(soup.corners);
   const TemplateTable table = buildTemplateTable(mesh);
   writeTemplateFile(output, table, force);
+  transaction.commit(&interruptRequested());
   if (!quiet) {
     const uint64_t missing =
         static_cast<uint64_t>(std::count(table.adjacency.begin(), table.adjacency.end(), -1));
@@ -200,7 +239,7 @@ int run(int argc, char** argv) {
   CLI::App app{
       "toposlice: fast slicing for mask-projection 3D printing, reusing topology across layers and models"};
   app.require_subcommand(1);
-  app.set_version_flag("--version", "toposlice 0.1.0");
+  app.set_version_flag("--version", "toposlice " TOPOSLICE_VERSION_TEXT);
 
   CommonOptions common;
   std::string model;
@@ -218,7 +257,7 @@ int run(int argc, char** argv) {
   std::vector<std::string> outputs;
   std::string templatePath, onMismatch = "fail";
   slice->add_option("-o,--output", outputs,
-                    "Contour output, by extension: .cli (Common Layer Interface), .svg");
+                    "Contour output, by extension: .cli (Common Layer Interface), .svg, .3mf (repeatable)");
   slice->add_option("--method", method, "cp (closest point), sr-lazy (paper's self reuse), sr (default)")
       ->check(CLI::IsMember({"cp", "sr-lazy", "sr"}));
   slice->add_flag("--cli-binary", options.cliBinary, "Write binary CLI instead of ASCII");
@@ -242,7 +281,9 @@ int run(int argc, char** argv) {
   slice->add_option("--contours", outputs, "Same as -o: contour output (.cli, .svg, .3mf)");
   slice->add_option("--masks", options.masks.output,
                     "Mask stack: .sl1 (Prusa SL1 zip of PNGs), .exr, .vdb, or a directory of PNGs");
-  slice->add_option("--printer", options.masks.printer, "Printer preset: " + printerNames());
+  slice->add_option(
+      "--printer", options.masks.printer,
+      "Printer preset: " + printerNames() + " (generic-4k has no fixed pixel size: add --pixel)");
   slice->add_option("--pixel", options.masks.pixel, "Pixel size in mm (overrides the preset)");
   slice->add_option("--resolution", resolution, "Image size WxH in pixels (overrides the preset)");
   slice->add_option("--origin", origin,
@@ -256,7 +297,10 @@ int run(int argc, char** argv) {
   slice->add_option("--remove", removeFeatures,
                     "Removal feature mesh, subtracted at the winding stage (repeatable)");
   std::string reportPath;
-  slice->add_option("--report", reportPath, "Per-layer CSV report: z, area, loops, islands; resin volume");
+  slice->add_option("--report", reportPath, "Per-layer CSV report (.csv): z, area, loops, islands");
+  std::string summaryPath;
+  slice->add_option("--summary", summaryPath,
+                    "Machine-readable summary (.json): counts, repairs, times, resin volume, outputs");
   slice->add_option("--close-gaps", options.slice.closeGaps,
                     "mm; bridge open contour ends of defective meshes up to this gap (default 0.05, 0: off)");
   bool keepOpen = false;
@@ -264,7 +308,10 @@ int run(int argc, char** argv) {
       "--keep-open", keepOpen,
       "Leave polylines open that no gap within --close-gaps closes (default: close the wider gaps too)");
   slice->add_flag("--fix-orientation", options.fixOrientation, "Flip an inside-out mesh (negative volume)");
-  slice->add_flag("-f,--force", options.overwrite, "Overwrite existing outputs");
+  slice->add_flag(
+      "-f,--force", options.overwrite,
+      "Replace existing outputs that toposlice wrote (never an input, nor a file or folder of other "
+      "content)");
 
   CLI::App* templ =
       app.add_subcommand("template", "Save a template's adjacency table for its customized variants");
@@ -272,13 +319,34 @@ int run(int argc, char** argv) {
   bool templateForce = false;
   templ->add_option("model", model, "Template STL")->required();
   templ->add_option("-o,--output", templateOut, "Table file to write (.topo)")->required();
-  templ->add_flag("-f,--force", templateForce, "Overwrite an existing table");
+  templ->add_flag("-f,--force", templateForce, "Replace an existing table that toposlice wrote");
 
   CLI::App* batch = app.add_subcommand("batch", "Slice every variant of a batch job with one template table");
   std::string jobPath;
   batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
 
   for (CLI::App* sub : {info, slice, templ, batch}) addCommon(sub, common);
+
+  // A first word that is no subcommand (a typo such as "slise") is named, with the nearest command.
+  const std::vector<CLI::App*> commands{info, slice, templ, batch};
+  if (argc > 1 && argv[1][0] != '-') {
+    const std::string word = argv[1];
+    const bool known =
+        std::any_of(commands.begin(), commands.end(), [&](CLI::App* c) { return c->get_name() == word; });
+    if (!known) {
+      std::string names, nearest;
+      std::size_t best = 3;  // at most two edits away
+      for (CLI::App* c : commands) {
+        names += (names.empty() ? "" : ", ") + c->get_name();
+        const std::size_t d = editDistance(word, c->get_name());
+        if (d < best) best = d, nearest = c->get_name();
+      }
+      std::fprintf(
+          stderr, "toposlice: error: unknown command '%s'%s; the commands are %s (see toposlice --help)\n",
+          word.c_str(), nearest.empty() ? "" : (" (did you mean '" + nearest + "'?)").c_str(), names.c_str());
+      return 2;
+    }
+  }
 
   try {
     app.parse(argc, argv);
@@ -289,8 +357,13 @@ int run(int argc, char** argv) {
   } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
-    // Usage errors: one line, status 2 (input and I/O errors are status 1).
-    std::fprintf(stderr, "toposlice: error: %s (see toposlice --help)\n", e.what());
+    // Usage errors: one line, status 2 (input and I/O errors are status 1), pointing to the help of the
+    // subcommand that was being parsed.
+    std::string help = "toposlice --help";
+    if (argc > 1)
+      for (CLI::App* c : commands)
+        if (c->get_name() == argv[1]) help = "toposlice " + c->get_name() + " --help";
+    std::fprintf(stderr, "toposlice: error: %s (see %s)\n", e.what(), help.c_str());
     return 2;
   }
 
@@ -300,7 +373,33 @@ int run(int argc, char** argv) {
   auto runCommand = [&]() -> int {
     if (*info) return runInfo(model);
     if (*templ) return runTemplate(model, templateOut, templateForce, common.quiet);
-    if (*batch) return runBatch(jobPath, BatchRunOptions{common.quiet});
+    if (*batch) {
+      gInterruptedMessage =
+          "interrupted; the variants completed before the signal are kept, the others left nothing behind "
+          "(run the same command again to finish the job)";
+      return runBatch(jobPath, BatchRunOptions{common.quiet});
+    }
+    // Options that cannot apply to this job are errors, not silently ignored.
+    const bool anySvg = std::any_of(outputs.begin(), outputs.end(), [](const std::string& o) {
+      return std::filesystem::path(o).extension() == ".svg" || std::filesystem::path(o).extension() == ".SVG";
+    });
+    const bool anyCli = std::any_of(outputs.begin(), outputs.end(), [](const std::string& o) {
+      return std::filesystem::path(o).extension() == ".cli" || std::filesystem::path(o).extension() == ".CLI";
+    });
+    auto needs = [](bool given, bool applies, const char* option, const char* what) {
+      if (given && !applies)
+        throw InputError(std::string(option) + " does nothing in this job: it needs " + what);
+    };
+    needs(slice->count("--svg-layers") > 0, anySvg, "--svg-layers", "an .svg output (-o FILE.svg)");
+    needs(options.cliBinary, anyCli, "--cli-binary", "a .cli output (-o FILE.cli)");
+    const bool masks = !options.masks.output.empty();
+    for (const char* opt : {"--printer", "--pixel", "--resolution", "--origin", "--mirror-x", "--mirror-y",
+                            "--antialias", "--crop"})
+      needs(slice->count(opt) > 0, masks, opt, "mask output (--masks)");
+    needs(slice->count("--on-mismatch") > 0, !templatePath.empty(), "--on-mismatch",
+          "a template (--template)");
+    needs(slice->count("--join-tolerance") > 0, method != "sr", "--join-tolerance",
+          "--method cp or sr-lazy (the default sr joins segments through the adjacency table)");
     options.planes = planeSpec(planes);
     parseSliceMethod(method, options.slice.method);
     parseCandidateSearch(candidates, options.slice.candidates);
@@ -309,6 +408,7 @@ int run(int argc, char** argv) {
     for (const auto& f : addFeatures) options.add.emplace_back(f);
     for (const auto& f : removeFeatures) options.remove.emplace_back(f);
     options.report = reportPath;
+    options.summary = summaryPath;
     if (!resolution.empty()) {
       unsigned w = 0, h = 0;
       char extra = 0;
@@ -329,6 +429,13 @@ int run(int argc, char** argv) {
   };
   try {
     const int status = runCommand();
+    if (gSignal != 0 && !*batch) {
+      // The signal came after the outputs had been committed: the job is complete, and saying
+      // "nothing was left" would be untrue. It ends normally.
+      std::fprintf(stderr,
+                   "toposlice: the stop signal came after the job had finished; its outputs are complete\n");
+      return status;
+    }
     endIfInterrupted();
     return status;
   } catch (const std::exception& e) {

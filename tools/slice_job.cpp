@@ -6,12 +6,16 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <memory>
+
+#include <nlohmann/json.hpp>
 
 #include "core/crossing.h"
 #include "core/mask_runs.h"
 #include "core/mesh_info.h"
+#include "core/number_text.h"
 #include "core/printer.h"
 #include "core/rasterize.h"
 #include "core/variant_check.h"
@@ -23,6 +27,7 @@
 #include "io/jobs/layer_report.h"
 #include "io/masks/mask_png.h"
 #include "io/masks/mask_sink.h"
+#include "io/output_file.h"
 #include "io/readers/stl_reader.h"
 #include "parallel/parallel.h"
 #include "parallel/variant_screen.h"
@@ -128,15 +133,39 @@ MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::
   if (o.pixel) pixel = *o.pixel;
   if (width == 0 || height == 0)
     throw InputError("masks need an image size: give --printer (" + printerNames() + ") or --resolution WxH");
-  if (!(pixel > 0)) throw InputError("masks need a positive pixel size: give --pixel MM");
+  if (!(pixel > 0))
+    throw InputError(o.printer.empty() || o.pixel
+                         ? "masks need a positive pixel size: give --pixel MM"
+                         : "printer '" + o.printer +
+                               "' has no fixed pixel size: give --pixel MM (the display's pixel pitch)");
   job.grid = placeGrid(extent, width, height, pixel, o.origin, o.mirrorX, o.mirrorY);
   const double overhang = gridOverhang(extent, job.grid);
   if (overhang > 0 && !o.crop) {
-    char text[256];
-    std::snprintf(text, sizeof text,
-                  "the model does not fit the %ux%u image at %g mm pixels (%.3f x %.3f mm): it sticks out by "
-                  "%.3f mm (use --crop to cut it off, a smaller model or larger pixels)",
-                  width, height, pixel, width * pixel, height * pixel, overhang);
+    // Which edges the model crosses, and by how much, in the model's coordinates.
+    const double x1 = job.grid.x0 + width * pixel, y1 = job.grid.y0 + height * pixel;
+    const struct {
+      double by;
+      const char* side;
+    } sides[] = {{job.grid.x0 - extent.min.x, "-x (left)"},
+                 {double{extent.max.x} - x1, "+x (right)"},
+                 {job.grid.y0 - extent.min.y, "-y (front)"},
+                 {double{extent.max.y} - y1, "+y (back)"}};
+    std::string where;
+    for (const auto& side : sides) {
+      if (!(side.by > 0)) continue;
+      char part[96];
+      std::snprintf(part, sizeof part, "%s%.3f mm beyond the %s edge", where.empty() ? "" : ", ", side.by,
+                    side.side);
+      where += part;
+    }
+    char text[512];
+    std::snprintf(
+        text, sizeof text,
+        "the model (x %.3f .. %.3f, y %.3f .. %.3f mm) does not fit the %ux%u image at %g mm pixels "
+        "(x %.3f .. %.3f, y %.3f .. %.3f mm): it sticks out %s (use --crop to cut it off, --origin "
+        "to move the image, a smaller model or larger pixels)",
+        extent.min.x, extent.max.x, extent.min.y, extent.max.y, width, height, pixel, job.grid.x0, x1,
+        job.grid.y0, y1, where.c_str());
     throw InputError(text);
   }
   job.layerHeight = planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
@@ -197,19 +226,186 @@ double peakResidentMiB() {
 
 // Two outputs with the same path would race for one name (and the first would stay behind when the
 // second fails): refused before anything is read or written.
-static void checkDistinctOutputs(const SliceJobOptions& options) {
+static std::vector<std::filesystem::path> allOutputs(const SliceJobOptions& options) {
   std::vector<std::filesystem::path> all = options.outputs;
-  if (!options.masks.output.empty()) all.push_back(options.masks.output);
-  if (!options.report.empty()) all.push_back(options.report);
+  for (const auto* p : {&options.masks.output, &options.report, &options.summary})
+    if (!p->empty()) all.push_back(*p);
+  return all;
+}
+
+static void checkDistinctOutputs(const SliceJobOptions& options) {
+  std::vector<std::filesystem::path> all = allOutputs(options);
   for (auto& p : all) p = std::filesystem::absolute(p).lexically_normal();
   for (std::size_t i = 0; i < all.size(); ++i)
     for (std::size_t j = i + 1; j < all.size(); ++j)
       if (all[i] == all[j]) throw InputError(all[i].string() + ": given as more than one output");
 }
 
+void checkNotAnInput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs) {
+  struct stat out {};
+  const bool exists = ::stat(output.c_str(), &out) == 0;
+  std::error_code ec;
+  const std::filesystem::path outPath = std::filesystem::weakly_canonical(output, ec);
+  for (const auto& input : inputs) {
+    if (input.empty()) continue;
+    struct stat in {};
+    bool same =
+        exists && ::stat(input.c_str(), &in) == 0 && in.st_dev == out.st_dev && in.st_ino == out.st_ino;
+    if (!same && !ec) {
+      std::error_code ec2;
+      const std::filesystem::path inPath = std::filesystem::weakly_canonical(input, ec2);
+      same = !ec2 && inPath == outPath;
+    }
+    if (same)
+      throw InputError(output.string() + ": is the job's input " + input.string() +
+                       "; an output never replaces an input, even with --force");
+  }
+}
+
+std::string maskOutputKinds() {
+  return ".sl1, .sl1s, .exr, .vdb, or a folder of PNGs (a name without an extension)";
+}
+
+void validateSliceOptions(const SliceJobOptions& options) {
+  const SliceSettings& s = options.slice;
+  if (!std::isfinite(s.closeGaps) || s.closeGaps < 0)
+    throw InputError("--close-gaps " + formatNumber(s.closeGaps) + ": expected a distance >= 0 mm");
+  if (!std::isfinite(s.joinTolerance) || !(s.joinTolerance > 0))
+    throw InputError("--join-tolerance " + formatNumber(s.joinTolerance) + ": expected a distance > 0 mm");
+  if (options.planes.layerHeight &&
+      !(std::isfinite(*options.planes.layerHeight) && *options.planes.layerHeight > 0))
+    throw InputError("--layer-height " + formatNumber(*options.planes.layerHeight) +
+                     ": the layer height must be a number > 0 mm");
+  if (options.planes.z0 && !std::isfinite(*options.planes.z0))
+    throw InputError("--z0 " + formatNumber(*options.planes.z0) + ": expected a finite height in mm");
+  if (options.planes.layers && *options.planes.layers == 0)
+    throw InputError("--layers 0: expected at least 1");
+  if (options.masks.pixel && !(std::isfinite(*options.masks.pixel) && *options.masks.pixel > 0))
+    throw InputError("--pixel " + formatNumber(*options.masks.pixel) + ": expected a pixel size > 0 mm");
+  if (options.masks.origin &&
+      !(std::isfinite(options.masks.origin->first) && std::isfinite(options.masks.origin->second)))
+    throw InputError("--origin: expected finite X,Y in mm");
+  if (!options.masks.output.empty()) {
+    const std::string ext = lowerExtension(options.masks.output);
+    if (!ext.empty() && ext != ".sl1" && ext != ".sl1s" && ext != ".exr" && ext != ".vdb")
+      throw InputError(options.masks.output.string() + ": toposlice does not write '" + ext +
+                       "' masks; it writes " + maskOutputKinds());
+  }
+  for (const auto& path : options.outputs) {
+    const std::string ext = lowerExtension(path);
+    if (ext != ".cli" && ext != ".svg" && ext != ".3mf")
+      throw InputError(path.string() + ": unknown contour output type '" + ext +
+                       "' (use .cli, .svg or .3mf)");
+  }
+  if (!options.report.empty() && lowerExtension(options.report) != ".csv")
+    throw InputError(options.report.string() + ": the per-layer report is CSV: give a .csv file name");
+  if (!options.summary.empty() && lowerExtension(options.summary) != ".json")
+    throw InputError(options.summary.string() + ": the summary is JSON: give a .json file name");
+}
+
+// A job whose planes all miss the model makes nothing: refused. Planes beyond the model's height on one
+// side (a z0 below the model, say) are allowed, with a warning, since a user may mean them.
+static void checkPlanesCutModel(const std::filesystem::path& model, const std::vector<double>& planes,
+                                const SliceJobResult& result, const std::vector<FacetSoup>& features,
+                                const SliceJobOptions& options, std::vector<std::string>& warnings) {
+  if (planes.empty())
+    throw InputError(model.string() + ": the planes give no layer to slice (layer height " +
+                     formatNumber(options.planes.layerHeight.value_or(0)) + " mm)");
+  double zmin = result.bounds.min.z, zmax = result.bounds.max.z;
+  for (std::size_t i = 0; i < options.add.size() && i < features.size(); ++i) {
+    const BoundingBox b = boundsOf(features[i].corners);
+    zmin = std::min<double>(zmin, b.min.z);
+    zmax = std::max<double>(zmax, b.max.z);
+  }
+  std::size_t outside = 0;
+  for (const double z : planes) outside += z <= zmin || z >= zmax ? 1 : 0;
+  char span[160];
+  std::snprintf(span, sizeof span, "planes at z %s .. %s mm, the model spans z %s .. %s mm",
+                formatNumber(planes.front()).c_str(), formatNumber(planes.back()).c_str(),
+                formatNumber(zmin).c_str(), formatNumber(zmax).c_str());
+  if (outside == planes.size())
+    throw InputError(model.string() + ": no plane cuts the model (" + span + "): nothing to slice");
+  // The default planes (z0 at the model's bottom, ceil(height / h) layers) may end half a layer above the
+  // top: that is the convention, not a choice to warn about.
+  const bool chosen = options.planes.z0 || options.planes.layers || !options.planes.explicitZ.empty();
+  if (outside > 0 && chosen)
+    warnings.push_back(model.string() + ": " + std::to_string(outside) + " of " +
+                       std::to_string(planes.size()) +
+                       " layers lie outside the model's height and are empty (" + span + ")");
+}
+
+// The machine-readable summary (--summary FILE.json, docs/FORMATS.md): written through the job's
+// transaction, so it appears only together with the outputs it lists.
+static void writeSliceSummary(const std::filesystem::path& model, const SliceJobOptions& options,
+                              const SliceJobResult& r, const std::vector<double>& planes) {
+  nlohmann::ordered_json j;
+  j["toposlice"] = TOPOSLICE_VERSION_TEXT;
+  j["model"] = model.string();
+  j["facets"] = r.facets;
+  j["bounds_mm"] = {{"min", {r.bounds.min.x, r.bounds.min.y, r.bounds.min.z}},
+                    {"max", {r.bounds.max.x, r.bounds.max.y, r.bounds.max.z}}};
+  j["method"] = sliceMethodName(options.slice.method);
+  j["topology"] = r.topology;
+  j["layers"] = {{"count", r.stats.layers},
+                 {"first_z_mm", planes.front()},
+                 {"last_z_mm", planes.back()},
+                 {"layer_height_mm",
+                  planes.size() >= 2 ? planes[1] - planes[0] : options.planes.layerHeight.value_or(0)}};
+  j["contours"] = {
+      {"segments", r.stats.segments}, {"loops", r.stats.loops}, {"open_polylines", r.stats.openPolylines}};
+  j["defects"] = {{"boundary_edges", r.edges.boundary},
+                  {"non_manifold_edges", r.edges.nonManifold},
+                  {"inconsistent_edges", r.edges.inconsistent}};
+  j["repairs"] = {{"degenerate_facets_skipped", r.degenerateFacets},
+                  {"gaps_bridged", r.stats.gaps.joins},
+                  {"close_gaps_mm", options.slice.closeGaps},
+                  {"loops_closed_by_bridges", r.stats.gaps.closedLoops},
+                  {"wider_gaps_closed", r.stats.gaps.selfClosed},
+                  {"polylines_left_open", r.stats.openPolylines},
+                  {"inside_out", r.inverted},
+                  {"orientation_flipped", r.flipped}};
+  nlohmann::ordered_json features = nlohmann::ordered_json::array();
+  for (const auto& f : options.add) features.push_back({{"role", "add"}, {"file", f.string()}});
+  for (const auto& f : options.remove) features.push_back({{"role", "remove"}, {"file", f.string()}});
+  j["features"] = features;
+  j["volume_ml"] = r.volumeMl;
+  j["volume_source"] =
+      options.masks.output.empty() ? "contour area x layer thickness" : "lit mask area x layer thickness";
+  j["model_volume_ml"] = std::abs(r.volume) / 1000.0;
+  j["seconds"] = {{"read", r.readSeconds},
+                  {"topology", r.topologySeconds},
+                  {"slice_and_write", r.sliceSeconds},
+                  {"total", r.readSeconds + r.topologySeconds + r.sliceSeconds}};
+  j["peak_memory_mib"] = peakResidentMiB();
+  nlohmann::ordered_json outputs = nlohmann::ordered_json::array();
+  for (const auto& p : allOutputs(options)) outputs.push_back(p.string());
+  j["outputs"] = outputs;
+  j["warnings"] = r.warnings;
+  const std::string text = j.dump(2) + "\n";
+  OutputFile file(options.summary, options.overwrite);
+  file.write(text.data(), text.size());
+  file.commit();
+}
+
+// Every input of the job: nothing it writes may be one of them.
+static std::vector<std::filesystem::path> allInputs(const std::filesystem::path& model,
+                                                    const SliceJobOptions& options) {
+  std::vector<std::filesystem::path> inputs{model};
+  inputs.insert(inputs.end(), options.add.begin(), options.add.end());
+  inputs.insert(inputs.end(), options.remove.begin(), options.remove.end());
+  if (!options.templateFile.empty()) inputs.push_back(options.templateFile);
+  inputs.insert(inputs.end(), options.otherInputs.begin(), options.otherInputs.end());
+  return inputs;
+}
+
 SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
                            const ProgressContext* progress) {
+  validateSliceOptions(options);
   checkDistinctOutputs(options);
+  const std::vector<std::filesystem::path> inputs = allInputs(model, options);
+  for (const auto& output : allOutputs(options)) checkNotAnInput(output, inputs);
+  // Every output of the job joins this transaction: they appear together at the end, or not at all.
+  OutputTransaction transaction;
   SliceJobResult result;
   auto start = std::chrono::steady_clock::now();
   FacetSoup soup;
@@ -253,6 +449,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const std::vector<double> planes =
       makePlanes(options.planes, result.bounds.min.z, result.bounds.max.z, error);
   if (!error.empty()) throw InputError(model.string() + ": " + error);
+  checkPlanesCutModel(model, planes, result, features, options, result.warnings);
 
   ContourJob job;
   job.name = model.stem().string();
@@ -370,18 +567,29 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   result.stats = sliceMeshes(meshes, planes, options.slice, stages, &context);
   if (result.stats.cancelled) throw InputError("interrupted");
   result.volumeMl = volumeMm3 / 1000.0;
+  if (result.inverted && !result.flipped)
+    result.warnings.push_back(
+        model.string() +
+        ": the mesh is inside out (negative volume); slice with --fix-orientation to flip it");
+  // Results that hold nothing are refused before any output appears.
+  if (result.stats.loops == 0 && result.stats.openPolylines == 0)
+    throw InputError(model.string() + ": every one of the " + std::to_string(planes.size()) +
+                     " layers is empty: nothing to write");
+  if (masks && !(volumeMm3 > 0))
+    throw InputError(model.string() + ": every mask layer is dark: nothing would print" +
+                     (result.inverted && !result.flipped
+                          ? " (the mesh is inside out: slice with --fix-orientation)"
+                          : " (the contours enclose no area on the pixel grid)"));
   for (auto& sink : sinks) sink->finish();
-  result.written = options.outputs;
   if (maskSink) {
     maskJob.volumeMl = result.volumeMl;
     maskSink->finish(maskJob);
-    result.written.push_back(options.masks.output);
   }
-  if (report) {
-    report->finish(result.volumeMl);
-    result.written.push_back(options.report);
-  }
+  if (report) report->finish();
   result.sliceSeconds = secondsSince(start);
+  if (!options.summary.empty()) writeSliceSummary(model, options, result, planes);
+  transaction.commit(&interruptRequested());
+  result.written = transaction.committed();
   return result;
 }
 

@@ -46,6 +46,10 @@ struct SliceJobOptions {
   MaskOptions masks;
   std::vector<std::filesystem::path> add, remove;  // add-on and removal features (inter-model reuse)
   std::filesystem::path report;                    // per-layer CSV report; empty: none
+  std::filesystem::path summary;                   // machine-readable summary (JSON); empty: none
+  // Further inputs of the job that no output may replace (the batch job file, the template's model and
+  // table); the model, features and templateFile are always checked.
+  std::vector<std::filesystem::path> otherInputs;
 };
 
 struct SliceJobResult {
@@ -60,10 +64,28 @@ struct SliceJobResult {
   SliceStats stats;
   double volumeMl = 0;  // resin: mask area (or contour area without masks) x layer thickness
   std::vector<std::filesystem::path> written;
+  // Things a user must hear even with --quiet (an inside-out mesh, layers outside the model), one line
+  // each, without the "warning: " prefix.
+  std::vector<std::string> warnings;
 };
 
-// Throws InputError (bad model, variant mismatch, bad settings) or OutputError; on any error or
-// cancellation no output is left under its final name.
+// Checks what can be checked before reading any file: numbers (finite, in range) and the output
+// extensions. Throws InputError naming the option.
+void validateSliceOptions(const SliceJobOptions& options);
+
+// The mask output extensions toposlice writes, for messages: ".sl1, .sl1s, .exr, .vdb, or a folder of
+// PNGs (a name without an extension)".
+std::string maskOutputKinds();
+
+// Throws InputError when `output` is, or resolves to (through links, or as a hard link), one of
+// `inputs`: a job never writes over its own input, even with --force.
+void checkNotAnInput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs);
+
+// Runs one slicing job. Its outputs form one OutputTransaction (io/output_file.h): they appear together
+// when everything succeeded, or not at all. Refused before anything is read: an output that is an input,
+// two outputs with the same path, bad numbers. Refused after slicing, before anything appears: no layer,
+// no plane that cuts the model, every layer empty, every mask layer dark. Throws InputError (bad model,
+// variant mismatch, bad settings, empty result) or OutputError.
 SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
                            const ProgressContext* progress);
 

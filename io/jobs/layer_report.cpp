@@ -22,10 +22,7 @@ void LayerReport::addLayer(uint32_t index, double z, double areaMm2, uint64_t lo
   file_->write(line, static_cast<std::size_t>(n));
 }
 
-void LayerReport::finish(double volumeMl) {
-  char line[96];
-  const int n = std::snprintf(line, sizeof line, "# resin volume %.6f ml\n", volumeMl);
-  file_->write(line, static_cast<std::size_t>(n));
+void LayerReport::finish() {
   file_->commit();
 }
 

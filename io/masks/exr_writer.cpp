@@ -27,7 +27,7 @@ constexpr const char* kChannel = "Y";
 class ExrSink final : public MaskSink {
  public:
   ExrSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
-      : dir_(path, overwrite), job_(job), rows_(size_t{job.grid.width} * job.grid.height) {
+      : dir_(path, overwrite, ".exr"), job_(job), rows_(size_t{job.grid.width} * job.grid.height) {
     for (int v = 0; v < 256; ++v) toHalf_[v] = Imath::half(static_cast<float>(v) / 255.0f);
   }
 

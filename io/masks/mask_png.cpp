@@ -489,7 +489,7 @@ void writeNewFile(const std::filesystem::path& file, std::span<const uint8_t> da
 class PngDirectorySink final : public MaskSink {
  public:
   PngDirectorySink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
-      : dir_(path, overwrite), job_(job) {}
+      : dir_(path, overwrite, ".png"), job_(job) {}
 
   bool wantsPng() const override { return true; }
 

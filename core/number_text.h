@@ -1,0 +1,16 @@
+// Numbers as text: the shortest decimal form that reads back to the same double (std::to_chars), so
+// settings print as a user typed them ("0.01", not "0.009999999999999998") and round-trip exactly.
+#pragma once
+
+#include <charconv>
+#include <string>
+
+namespace toposlice {
+
+inline std::string formatNumber(double value) {
+  char text[32];
+  const auto [end, ec] = std::to_chars(text, text + sizeof text, value);
+  return ec == std::errc{} ? std::string(text, end) : std::string("?");
+}
+
+}  // namespace toposlice
