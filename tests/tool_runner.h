@@ -7,6 +7,7 @@
 
 #include <fcntl.h>
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/types.h>
 #include <sys/wait.h>
@@ -223,6 +224,14 @@ class CliToolBase : public testing::Test {
       defaults.sa_handler = SIG_DFL;
       ::sigaction(SIGINT, &defaults, nullptr);
       ::sigaction(SIGTERM, &defaults, nullptr);
+      if (fileSizeLimit_ > 0) {  // writes past it fail with EFBIG, as on a full disk
+        struct rlimit limit {};
+        limit.rlim_cur = limit.rlim_max = fileSizeLimit_;
+        ::setrlimit(RLIMIT_FSIZE, &limit);
+        struct sigaction ignore {};
+        ignore.sa_handler = SIG_IGN;
+        ::sigaction(SIGXFSZ, &ignore, nullptr);
+      }
       sigset_t none;
       ::sigemptyset(&none);
       ::sigprocmask(SIG_SETMASK, &none, nullptr);
@@ -275,7 +284,12 @@ class CliToolBase : public testing::Test {
     EXPECT_TRUE(left.empty()) << "temporaries left: " << testing::PrintToString(left);
   }
 
+  // A limit on the size of every file the program writes (RLIMIT_FSIZE; 0: none): a write past it fails
+  // with EFBIG, a disk-full failure without a full disk.
+  void setFileSizeLimit(rlim_t bytes) { fileSizeLimit_ = bytes; }
+
   fs::path root_, dir_;
+  rlim_t fileSizeLimit_ = 0;
   int runs_ = 0;
   std::string outPath_, errPath_;
 };

@@ -72,6 +72,14 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
   o.add = variant.add;
   o.remove = variant.remove;
   o.report = variant.report;
+  // No output of the job may replace one of its inputs, even through a link: the job file, the
+  // template's model and table, and every variant's meshes.
+  o.otherInputs = {job.sourceFile, job.templateModel, job.templateFile};
+  for (const BatchVariant& v : job.variants) {
+    o.otherInputs.push_back(v.model);
+    o.otherInputs.insert(o.otherInputs.end(), v.add.begin(), v.add.end());
+    o.otherInputs.insert(o.otherInputs.end(), v.remove.begin(), v.remove.end());
+  }
   return o;
 }
 

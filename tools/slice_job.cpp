@@ -115,6 +115,14 @@ double layerThickness(const std::vector<double>& planes, uint32_t k, const Plane
   return (planes[hi] - planes[lo]) / static_cast<double>(hi - lo);
 }
 
+// The layer height as the user gave it (0.01, not the difference of two planes, 0.009999999999999998),
+// so that printer files and the summary carry a value that reads back exactly; for an explicit list or a
+// layer count, the distance between the first two planes.
+double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes) {
+  if (spec.explicitZ.empty() && spec.layerHeight) return *spec.layerHeight;
+  return planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
+}
+
 MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::string& name,
                     const std::vector<double>& planes) {
   MaskJob job;
@@ -168,7 +176,6 @@ MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::
         job.grid.y0, y1, where.c_str());
     throw InputError(text);
   }
-  job.layerHeight = planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
   job.layerCount = static_cast<uint32_t>(planes.size());
   job.antiAliased = o.antialias;
   return job;
@@ -242,21 +249,14 @@ static void checkDistinctOutputs(const SliceJobOptions& options) {
 }
 
 void checkNotAnInput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs) {
+  // An output that does not exist yet cannot be an input (inputs exist); one that does is compared by
+  // device and inode, following links, so links and hard links to an input are caught as well.
   struct stat out {};
-  const bool exists = ::stat(output.c_str(), &out) == 0;
-  std::error_code ec;
-  const std::filesystem::path outPath = std::filesystem::weakly_canonical(output, ec);
+  if (::stat(output.c_str(), &out) != 0) return;
   for (const auto& input : inputs) {
-    if (input.empty()) continue;
     struct stat in {};
-    bool same =
-        exists && ::stat(input.c_str(), &in) == 0 && in.st_dev == out.st_dev && in.st_ino == out.st_ino;
-    if (!same && !ec) {
-      std::error_code ec2;
-      const std::filesystem::path inPath = std::filesystem::weakly_canonical(input, ec2);
-      same = !ec2 && inPath == outPath;
-    }
-    if (same)
+    if (input.empty() || ::stat(input.c_str(), &in) != 0) continue;
+    if (in.st_dev == out.st_dev && in.st_ino == out.st_ino)
       throw InputError(output.string() + ": is the job's input " + input.string() +
                        "; an output never replaces an input, even with --force");
   }
@@ -349,8 +349,7 @@ static void writeSliceSummary(const std::filesystem::path& model, const SliceJob
   j["layers"] = {{"count", r.stats.layers},
                  {"first_z_mm", planes.front()},
                  {"last_z_mm", planes.back()},
-                 {"layer_height_mm",
-                  planes.size() >= 2 ? planes[1] - planes[0] : options.planes.layerHeight.value_or(0)}};
+                 {"layer_height_mm", nominalLayerHeight(options.planes, planes)}};
   j["contours"] = {
       {"segments", r.stats.segments}, {"loops", r.stats.loops}, {"open_polylines", r.stats.openPolylines}};
   j["defects"] = {{"boundary_edges", r.edges.boundary},
@@ -400,10 +399,10 @@ static std::vector<std::filesystem::path> allInputs(const std::filesystem::path&
 
 SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOptions& options,
                            const ProgressContext* progress) {
-  validateSliceOptions(options);
-  checkDistinctOutputs(options);
   const std::vector<std::filesystem::path> inputs = allInputs(model, options);
   for (const auto& output : allOutputs(options)) checkNotAnInput(output, inputs);
+  validateSliceOptions(options);
+  checkDistinctOutputs(options);
   // Every output of the job joins this transaction: they appear together at the end, or not at all.
   OutputTransaction transaction;
   SliceJobResult result;
@@ -472,6 +471,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
     }
     maskJob = makeMaskJob(options.masks, extent, job.name, planes);
+    maskJob.layerHeight = nominalLayerHeight(options.planes, planes);
     // Archive timestamps come from the model file, so the same input gives the same bytes.
     struct stat info {};
     if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;

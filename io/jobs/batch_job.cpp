@@ -420,7 +420,9 @@ BatchJob readBatchJob(const std::filesystem::path& path) {
   }
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) throw InputError(name + ": read error");
-  return parseBatchJob(text, std::filesystem::absolute(path).parent_path(), name);
+  BatchJob job = parseBatchJob(text, std::filesystem::absolute(path).parent_path(), name);
+  job.sourceFile = std::filesystem::absolute(path);
+  return job;
 }
 
 }  // namespace toposlice

@@ -52,6 +52,7 @@ struct BatchJob {
   uint32_t threads = 0;                               // 0: all cores
   bool overwrite = false;                             // replace existing outputs
   std::vector<BatchVariant> variants;                 // at least one
+  std::filesystem::path sourceFile;  // the job file (readBatchJob); empty when parsed from text
 };
 
 // Output extensions accepted for BatchVariant::contours and ::masks (lower case, with the dot).

@@ -1,0 +1,388 @@
+// A user's files are sacred (docs/RELIABILITY.md, "What toposlice promises about your files"): the
+// cases of the output-safety issue, each run through the real program as a user runs it.
+//   1. an interrupted `template` leaves no table and says so truthfully;
+//   2. a job's outputs are one unit: one failing output leaves none of them (slice and batch);
+//   3. --force replaces only what toposlice writes;
+//   4. no output ever replaces an input, through links too;
+//   5. jobs that make nothing say so;
+//   6. numbers and options that cannot apply are refused;
+//   7. messages name what is wrong and where.
+#include <gtest/gtest.h>
+#include <sys/resource.h>
+
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "tests/tool_runner.h"
+
+namespace toposlice {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+using namespace tool_test;
+
+using OutputSafety = CliToolBase;
+using EmptyResults = CliToolBase;
+using OptionChecks = CliToolBase;
+using Messages = CliToolBase;
+using Summary = CliToolBase;
+
+// A binary STL of an axis-aligned box [0, s]^2 x [z0, z0 + s]; `insideOut` reverses every facet.
+std::string boxStl(double s, double z0, bool insideOut) {
+  const float p[8][3] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0},
+                         {0, 0, 1}, {1, 0, 1}, {1, 1, 1}, {0, 1, 1}};
+  const int faces[12][3] = {{0, 2, 1}, {0, 3, 2}, {4, 5, 6}, {4, 6, 7}, {0, 1, 5}, {0, 5, 4},
+                            {1, 2, 6}, {1, 6, 5}, {2, 3, 7}, {2, 7, 6}, {3, 0, 4}, {3, 4, 7}};
+  std::string stl(80, ' ');
+  const uint32_t count = 12;
+  stl.append(reinterpret_cast<const char*>(&count), 4);
+  for (const auto& f : faces) {
+    const float normal[3] = {0, 0, 0};
+    stl.append(reinterpret_cast<const char*>(normal), 12);
+    for (int c = 0; c < 3; ++c) {
+      const int v = f[insideOut ? 2 - c : c];
+      const float xyz[3] = {static_cast<float>(p[v][0] * s), static_cast<float>(p[v][1] * s),
+                            static_cast<float>(z0 + p[v][2] * s)};
+      stl.append(reinterpret_cast<const char*>(xyz), 12);
+    }
+    stl.append(2, '\0');
+  }
+  return stl;
+}
+
+std::vector<std::string> entries(const fs::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 1. An interrupted template run leaves no table, or finishes and keeps it, and says which.
+
+TEST_F(OutputSafety, InterruptedTemplateLeavesNoTableOrACompleteOne) {
+  const fs::path model = sharedModel("derived/aligner_upper_case0.stl.gz");
+  if (!fs::exists(model)) GTEST_SKIP() << model << " not found";
+  int stopped = 0;
+  for (const auto delay : {10ms, 30ms, 60ms, 100ms, 150ms}) {
+    fs::remove(path("t.topo"));
+    const pid_t pid = start({"template", model.string(), "-o", "t.topo"});
+    std::this_thread::sleep_for(delay);
+    ::kill(pid, SIGTERM);
+    const RunResult r = finish(pid);
+    if (r.signalled(SIGTERM)) {
+      ++stopped;
+      EXPECT_FALSE(fs::exists(path("t.topo")))
+          << "killed after " << delay.count() << " ms, yet a table is there\n"
+          << r.describe();
+      if (!r.err.empty()) {
+        EXPECT_TRUE(contains(r.err, "no output was left behind")) << r.describe();
+      }
+    } else {
+      // The signal came after the table was complete: the run says so and ends normally.
+      ASSERT_EQ(r.code(), 0) << r.describe();
+      const std::string table = readBytes(path("t.topo"));
+      EXPECT_TRUE(table.starts_with(std::string("TOPOSLC", 7))) << "not a complete table";
+    }
+    expectNoTemporaries();
+  }
+  EXPECT_GT(stopped, 0) << "no run was stopped before its end: the delays are too long for this machine";
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 2. Several outputs are one unit.
+
+TEST_F(OutputSafety, OneFailingOutputLeavesNoneOfTheJobsOutputs) {
+  // Every file may grow to 600 kB: the CLI (~500 kB), 3MF (~350 kB) and report fit, the SL1 (~900 kB)
+  // does not, so its write fails as on a full disk, after the others were complete.
+  setFileSizeLimit(600 * 1024);
+  const RunResult r = run({"slice", examplePart().string(), "-o", "r.cli", "-o", "r.3mf", "--report", "r.csv",
+                           "--masks", "x.sl1", "--printer", "sl1", "--summary", "s.json"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "x.sl1")) << r.err;
+  EXPECT_TRUE(contains(r.err, "File too large")) << r.err;
+  EXPECT_TRUE(entries(dir_).empty()) << testing::PrintToString(entries(dir_));
+}
+
+TEST_F(OutputSafety, ReplacedOutputsComeBackWhenTheJobFails) {
+  ASSERT_EQ(run({"slice", examplePart().string(), "-H", "0.5", "-o", "r.cli", "--report", "r.csv"}).code(),
+            0);
+  const std::string cli = readBytes(path("r.cli")), csv = readBytes(path("r.csv"));
+  setFileSizeLimit(600 * 1024);
+  const RunResult r = run({"slice", examplePart().string(), "-H", "0.05", "-o", "r.cli", "--report", "r.csv",
+                           "--masks", "x.sl1", "--printer", "sl1", "--force"});
+  expectOneErrorLine(r);
+  EXPECT_EQ(readBytes(path("r.cli")), cli);  // the earlier outputs, untouched
+  EXPECT_EQ(readBytes(path("r.csv")), csv);
+  EXPECT_EQ(entries(dir_), (std::vector<std::string>{"r.cli", "r.csv"}));
+}
+
+TEST_F(OutputSafety, FailingBatchVariantLeavesNoneOfItsOutputs) {
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": " + jsonString(examplePart().string()) +
+                 "}, \"settings\": {\"layer_height\": 0.05, \"printer\": \"sl1\"}, \"variants\": [{\"name\": "
+                 "\"a\", \"model\": " +
+                 jsonString(examplePart().string()) +
+                 ", \"contours\": \"a.cli\", \"masks\": \"a.sl1\", \"report\": \"a.csv\"}]}");
+  setFileSizeLimit(600 * 1024);
+  const RunResult r = run({"batch", "job.json", "-q"});
+  EXPECT_EQ(r.code(), 1) << r.describe();
+  EXPECT_TRUE(contains(r.err, "failed")) << r.describe();
+  EXPECT_EQ(entries(dir_), std::vector<std::string>{"job.json"});
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 3. --force replaces only toposlice's own outputs.
+
+TEST_F(OutputSafety, ForceRefusesAFolderWithForeignFiles) {
+  fs::create_directory(path("masks"));
+  writeBytes(path("masks/notes.txt"), "my notes");
+  fs::create_directory(path("masks/sub"));
+  const RunResult r =
+      run({"slice", examplePart().string(), "--masks", "masks", "--printer", "sl1", "--force"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "notes.txt") || contains(r.err, "'sub'")) << r.err;
+  EXPECT_EQ(readBytes(path("masks/notes.txt")), "my notes");
+  EXPECT_TRUE(fs::is_directory(path("masks/sub")));
+  expectNoTemporaries();
+}
+
+TEST_F(OutputSafety, ForceReplacesAFolderToposliceWrote) {
+  ASSERT_EQ(
+      run({"slice", examplePart().string(), "-H", "0.5", "--masks", "masks", "--printer", "sl1"}).code(), 0);
+  const auto first = entries(path("masks"));
+  ASSERT_EQ(first.size(), 16u);
+  const RunResult r =
+      run({"slice", examplePart().string(), "-H", "1", "--masks", "masks", "--printer", "sl1", "--force"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_EQ(entries(path("masks")).size(), 8u);
+  expectNoTemporaries();
+}
+
+TEST_F(OutputSafety, ForceRefusesAFileOfAnotherFormat) {
+  writeBytes(path("r.csv"), "name,phone\nAnn,123\n");
+  writeBytes(path("p.cli"), "my own notes, not a CLI file\n");
+  for (const auto& args : std::vector<std::vector<std::string>>{{"--report", "r.csv"}, {"-o", "p.cli"}}) {
+    std::vector<std::string> all{"slice", examplePart().string(), "-H", "0.5", "--force"};
+    all.insert(all.end(), args.begin(), args.end());
+    const RunResult r = run(all);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, args[1])) << r.err;
+  }
+  EXPECT_EQ(readBytes(path("r.csv")), "name,phone\nAnn,123\n");
+  EXPECT_EQ(readBytes(path("p.cli")), "my own notes, not a CLI file\n");
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 4. An output is never an input.
+
+TEST_F(OutputSafety, OutputThatIsAnInputIsRefusedEvenWithForce) {
+  const std::string model = readBytes(examplePart());
+  writeBytes(path("copy.stl"), model);
+  fs::create_symlink("copy.stl", path("link.csv"));
+  fs::create_hard_link(path("copy.stl"), path("hard.cli"));
+  const std::vector<std::vector<std::string>> cases{
+      {"slice", "copy.stl", "--masks", "copy.stl", "--force"},
+      {"slice", "copy.stl", "--report", "copy.stl", "--force"},
+      {"slice", "copy.stl", "--report", "link.csv", "--force"},
+      {"slice", "copy.stl", "-o", "hard.cli", "--force"},
+      {"slice", examplePart().string(), "--add", "copy.stl", "-o", "hard.cli", "--force"},
+      {"template", "copy.stl", "-o", "copy.stl", "--force"},
+      {"template", "copy.stl", "-o", "link.csv", "--force"},
+  };
+  for (const auto& args : cases) {
+    const RunResult r = run(args);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, "input")) << r.err;
+    EXPECT_EQ(readBytes(path("copy.stl")), model) << testing::PrintToString(args);
+  }
+  EXPECT_TRUE(fs::is_symlink(path("link.csv")));
+  expectNoTemporaries();
+}
+
+TEST_F(OutputSafety, BatchOutputThatIsAnInputIsRefused) {
+  const std::string model = readBytes(examplePart());
+  writeBytes(path("v.stl"), model);
+  fs::create_symlink("v.stl", path("v.cli"));
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": \"v.stl\"}, \"settings\": {\"overwrite\": true, \"layer_height\": 0.5}, \"variants\": "
+             "[{\"name\": \"a\", \"model\": \"v.stl\", \"contours\": \"v.cli\"}]}");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  EXPECT_EQ(r.code(), 1) << r.describe();
+  EXPECT_TRUE(contains(r.err, "input")) << r.describe();
+  EXPECT_EQ(readBytes(path("v.stl")), model);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 5. Jobs that make nothing.
+
+TEST_F(EmptyResults, NoLayersOrNoPlaneInTheModelIsAnError) {
+  for (const auto& args : std::vector<std::vector<std::string>>{
+           {"-H", "1e-19"}, {"--z0", "1000"}, {"--z", "100,200"}, {"--z", "-5,-4"}}) {
+    std::vector<std::string> all{"slice", examplePart().string(), "-o", "a.cli"};
+    all.insert(all.end(), args.begin(), args.end());
+    const RunResult r = run(all);
+    expectOneErrorLine(r);
+    EXPECT_FALSE(fs::exists(path("a.cli"))) << testing::PrintToString(args);
+  }
+  expectNoTemporaries();
+}
+
+TEST_F(EmptyResults, InsideOutMeshWithMasksIsAnErrorAndAWarningWithContours) {
+  writeBytes(path("inv.stl"), boxStl(5, 0, true));
+  const RunResult masks =
+      run({"slice", "inv.stl", "-H", "0.5", "--masks", "m.sl1", "--printer", "sl1", "-q"});
+  expectOneErrorLine(masks);
+  EXPECT_TRUE(contains(masks.err, "dark")) << masks.err;
+  EXPECT_TRUE(contains(masks.err, "--fix-orientation")) << masks.err;
+  EXPECT_FALSE(fs::exists(path("m.sl1")));
+
+  const RunResult contours = run({"slice", "inv.stl", "-H", "0.5", "-o", "c.cli", "-q"});
+  ASSERT_EQ(contours.code(), 0) << contours.describe();
+  EXPECT_TRUE(contours.out.empty()) << contours.out;
+  EXPECT_TRUE(contains(contours.err, "warning")) << contours.err;  // not hidden by -q
+  EXPECT_TRUE(contains(contours.err, "inside out")) << contours.err;
+
+  const RunResult fixed = run(
+      {"slice", "inv.stl", "-H", "0.5", "--masks", "m.sl1", "--printer", "sl1", "-q", "--fix-orientation"});
+  EXPECT_EQ(fixed.code(), 0) << fixed.describe();
+  EXPECT_TRUE(fixed.err.empty()) << fixed.err;
+}
+
+TEST_F(EmptyResults, PlanesBelowTheModelAreAWarningEvenWhenQuiet) {
+  writeBytes(path("box.stl"), boxStl(2, 3, false));  // z 3 .. 5
+  const RunResult r = run({"slice", "box.stl", "-H", "0.5", "--z0", "0", "-o", "b.cli", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_TRUE(contains(r.err, "warning: ")) << r.err;
+  EXPECT_TRUE(contains(r.err, "6 of 10 layers")) << r.err;
+  EXPECT_TRUE(fs::exists(path("b.cli")));
+}
+
+TEST_F(EmptyResults, NoOutputSaysNothingWasWritten) {
+  const RunResult r = run({"slice", examplePart().string(), "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_TRUE(contains(r.err, "nothing was written")) << r.err;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 6. Numbers and options.
+
+TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
+      {{"--close-gaps", "-1"}, "--close-gaps"},
+      {{"--close-gaps", "nan"}, "--close-gaps"},
+      {{"--method", "cp", "--join-tolerance", "nan"}, "--join-tolerance"},
+      {{"--z", "1,,2"}, "--z"},
+      {{"--z", "1,2,"}, "--z"},
+      {{"--z", "1,2,1e400"}, "1e400"},
+      {{"--layer-height", "inf"}, "layer height"},
+      {{"--masks", "m.sl1", "--printer", "sl1", "--pixel", "-0.1"}, "--pixel"},
+  };
+  for (const auto& [args, named] : cases) {
+    std::vector<std::string> all{"slice", examplePart().string(), "-o", "a.cli"};
+    all.insert(all.end(), args.begin(), args.end());
+    const RunResult r = run(all);
+    EXPECT_NE(r.code(), 0) << r.describe();
+    EXPECT_TRUE(contains(r.err, named)) << testing::PrintToString(args) << "\n" << r.err;
+    EXPECT_FALSE(fs::exists(path("a.cli")));
+  }
+}
+
+TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
+  const std::vector<std::vector<std::string>> cases{
+      {"-o", "a.cli", "--svg-layers", "1"},
+      {"-o", "a.svg", "--cli-binary"},
+      {"-o", "a.cli", "--antialias"},
+      {"-o", "a.cli", "--mirror-x"},
+      {"-o", "a.cli", "--crop"},
+      {"-o", "a.cli", "--printer", "sl1"},
+      {"-o", "a.cli", "--on-mismatch", "rebuild"},
+      {"-o", "a.cli", "--join-tolerance", "0.001"},
+  };
+  for (const auto& args : cases) {
+    std::vector<std::string> all{"slice", examplePart().string()};
+    all.insert(all.end(), args.begin(), args.end());
+    const RunResult r = run(all);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, args[2])) << r.err;
+    EXPECT_TRUE(contains(r.err, "does nothing")) << r.err;
+  }
+  EXPECT_TRUE(entries(dir_).empty());
+}
+
+TEST_F(OptionChecks, UnknownMaskExtensionListsTheKnownOnes) {
+  const RunResult r = run({"slice", examplePart().string(), "--masks", "layers.zip", "--printer", "sl1"});
+  expectOneErrorLine(r);
+  for (const char* ext : {"layers.zip", ".sl1", ".exr", ".vdb", "PNG"})
+    EXPECT_TRUE(contains(r.err, ext)) << r.err;
+  EXPECT_FALSE(fs::exists(path("layers.zip")));
+}
+
+// ---------------------------------------------------------------------------------------------------
+// 7. Messages.
+
+TEST_F(Messages, MistypedCommandIsNamedWithASuggestion) {
+  const RunResult r = run({"slise", examplePart().string()});
+  EXPECT_EQ(r.code(), 2) << r.describe();
+  EXPECT_TRUE(contains(r.err, "'slise'")) << r.err;
+  EXPECT_TRUE(contains(r.err, "did you mean 'slice'")) << r.err;
+}
+
+TEST_F(Messages, UsageErrorsPointToTheSubcommandsHelp) {
+  const RunResult r = run({"slice", examplePart().string(), "--no-such-option"});
+  EXPECT_EQ(r.code(), 2) << r.describe();
+  EXPECT_TRUE(contains(r.err, "toposlice slice --help")) << r.err;
+}
+
+TEST_F(Messages, MissingOutputFolderIsNamedNotTheTemporary) {
+  const RunResult r = run({"slice", examplePart().string(), "-o", "nowhere/a.cli"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "nowhere/a.cli: ")) << r.err;
+  EXPECT_TRUE(contains(r.err, "'nowhere' does not exist")) << r.err;
+  EXPECT_FALSE(contains(r.err, ".tmp-")) << r.err;
+}
+
+TEST_F(Messages, ModelTooLargeSaysWhichEdges) {
+  const RunResult r =
+      run({"slice", examplePart().string(), "--masks", "m", "--resolution", "100x100", "--pixel", "0.1"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "+x")) << r.err;
+  EXPECT_TRUE(contains(r.err, "-y")) << r.err;
+}
+
+TEST_F(Messages, HelpListsEveryContourFormatAndThePixelNeed) {
+  const RunResult r = run({"slice", "--help"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_TRUE(contains(r.out, ".3mf")) << r.out;
+  EXPECT_TRUE(contains(r.out, "--summary")) << r.out;
+  const RunResult pixel = run({"slice", examplePart().string(), "--masks", "m", "--printer", "generic-4k"});
+  expectOneErrorLine(pixel);
+  EXPECT_TRUE(contains(pixel.err, "--pixel")) << pixel.err;
+}
+
+// ---------------------------------------------------------------------------------------------------
+// The machine-readable summary, and numbers that read back exactly.
+
+TEST_F(Summary, JsonSummaryHasTheCountsVolumeAndOutputs) {
+  const RunResult r = run({"slice", examplePart().string(), "-H", "0.01", "--masks", "m.sl1", "--printer",
+                           "sl1", "--report", "r.csv", "--summary", "s.json", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  const auto j = nlohmann::json::parse(readBytes(path("s.json")));
+  EXPECT_EQ(j["layers"]["count"], 770);
+  EXPECT_EQ(j["layers"]["layer_height_mm"].get<double>(), 0.01);
+  EXPECT_GT(j["volume_ml"].get<double>(), 0.5);
+  EXPECT_LT(j["volume_ml"].get<double>(), 0.6);
+  EXPECT_EQ(j["facets"], 8384);
+  EXPECT_EQ(j["outputs"].size(), 3u);
+  EXPECT_TRUE(j["warnings"].empty());
+  // The CSV is plain rows (no trailer), and the SL1 carries the layer height as given.
+  for (const auto& line : splitLines(readBytes(path("r.csv")))) EXPECT_FALSE(line.starts_with("#")) << line;
+}
+
+}  // namespace
+}  // namespace toposlice
