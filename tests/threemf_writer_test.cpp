@@ -8,10 +8,12 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -21,8 +23,10 @@
 #include "core/contours.h"
 #include "io/contours/threemf_writer.h"
 #include "io/errors.h"
+#include "io/readers/stl_writer.h"
 #include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"
+#include "tests/fixtures/winding.h"
 
 namespace toposlice {
 namespace {
@@ -672,6 +676,59 @@ TEST(ThreeMfWriter, FeaturesAreObjectsOfTheirOwnAndRemovalsAreReversed) {
       for (const ReadObject& o : m.objects) area += polygonArea(o.slices[k], o.slices[k].polygons[0]);
       EXPECT_NEAR(area, 100.0 + 4.0 - 4.0, 1e-9) << "slice " << k;
     }
+  }
+}
+
+// The toposlice program on a box with an add-on half sunk into it and a cylinder removal reaching
+// beyond its side (as in cli_tool_test.cpp): the 3MF read back by lib3mf, combined by the documented
+// rule, gives the report's (mask) area on every layer.
+TEST(ThreeMfWriter, ProgramOutputWithFeaturesCombinesToTheReportArea) {
+  ScratchDir dir;
+  writeBinaryStl(dir / "model.stl", fixtures::box(0, 0, 0, 20, 10, 5), "model", false);
+  writeBinaryStl(dir / "knob.stl", fixtures::box(2, 6, 4, 8, 12, 7), "add-on", false);
+  writeBinaryStl(dir / "bore.stl", fixtures::cylinder(19, 5, 2, 32, 2, 6), "removal", false);
+  const char* env = std::getenv("TOPOSLICE_BIN");
+  const std::string program = env != nullptr && *env != '\0' ? env : TOPOSLICE_BIN_PATH;
+  const auto quoted = [](const fs::path& p) { return "'" + p.string() + "'"; };
+  const std::string command = "'" + program + "' slice " + quoted(dir / "model.stl") + " --add " +
+                              quoted(dir / "knob.stl") + " --remove " + quoted(dir / "bore.stl") +
+                              " -H 0.5 -o " + quoted(dir / "f.3mf") + " --masks " + quoted(dir / "masks") +
+                              " --resolution 480x300 --pixel 0.05 --report " + quoted(dir / "r.csv") + " -q";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+
+  const ReadModel m = readWithLib3mf(dir / "f.3mf");
+  ASSERT_TRUE(m.ok) << std::hex << m.readError << " " << m.readMessage;
+  EXPECT_TRUE(m.warningCodes.empty()) << "first warning " << std::hex << m.warningCodes[0];
+  ASSERT_EQ(m.objects.size(), 3u);
+  EXPECT_EQ(m.objects[1].name, "add knob");
+  EXPECT_EQ(m.objects[2].name, "remove bore");
+  EXPECT_EQ(m.buildObjectIds, (std::vector<DWORD>{m.objects[0].id, m.objects[1].id}));
+  EXPECT_LT(signedVolume(m.objects[2]), 0);  // the removal's mesh is inside out
+
+  std::istringstream report(readFile(dir / "r.csv"));
+  std::string row;
+  std::getline(report, row);  // header
+  constexpr std::size_t kLayers = 10;
+  for (const ReadObject& o : m.objects) ASSERT_EQ(o.slices.size(), kLayers) << o.name;
+  for (std::size_t k = 0; k < kLayers; ++k) {
+    std::vector<std::vector<Point2d>> loops;
+    for (const ReadObject& o : m.objects) {
+      const ReadSlice& s = o.slices[k];
+      EXPECT_EQ(s.ztop, m.objects[0].slices[k].ztop);
+      for (const auto& polygon : s.polygons) {
+        std::vector<Point2d>& loop = loops.emplace_back();
+        for (std::size_t i = 0; i + 1 < polygon.size(); ++i)
+          loop.push_back(
+              {s.vertices.at(polygon[i]).m_fPosition[0], s.vertices.at(polygon[i]).m_fPosition[1]});
+        if (&o == &m.objects[2]) {
+          EXPECT_LT(signedArea(loop), 0) << "a removal's loops are reversed: slice " << k;
+        }
+      }
+    }
+    ASSERT_TRUE(std::getline(report, row));
+    const std::size_t c1 = row.find(','), c2 = row.find(',', c1 + 1);
+    const double reported = std::stod(row.substr(c2 + 1));
+    EXPECT_NEAR(fixtures::positiveWindingArea(loops, 0.001), reported, 0.01 * reported) << row;
   }
 }
 
