@@ -30,7 +30,11 @@
 #include <thread>
 #include <vector>
 
+#include "core/contours.h"
 #include "io/masks/mask_png.h"
+#include "io/readers/stl_writer.h"
+#include "tests/fixtures/shapes.h"
+#include "tests/fixtures/winding.h"
 #include "tests/tool_runner.h"
 
 namespace toposlice {
@@ -583,6 +587,155 @@ TEST_F(CliToolFeatures, AddOnsLightMorePixelsAndEngravingsFewer) {
   EXPECT_TRUE(contains(stage2.out, "loaded from template")) << stage2.out;
   EXPECT_GT(litPixelsInDirectory(path("stage2"), &images), 0u);
   EXPECT_EQ(images, 40u);
+  expectNoTemporaries();
+}
+
+// An ASCII CLI file's labels and layers: every polyline with its id, dir and points (a closed polyline's
+// repeated last point dropped).
+struct ParsedCli {
+  std::vector<std::string> labels;  // "$$LABEL/" lines without the command
+  struct Polyline {
+    int id = 0, dir = 0;
+    std::vector<Point2d> points;
+  };
+  std::vector<std::vector<Polyline>> layers;
+};
+
+ParsedCli parseAsciiCli(const std::string& text) {
+  ParsedCli cli;
+  for (const std::string& line : splitLines(text)) {
+    if (line.starts_with("$$LABEL/")) cli.labels.push_back(line.substr(8));
+    if (line.starts_with("$$LAYER/")) cli.layers.emplace_back();
+    if (!line.starts_with("$$POLYLINE/") || cli.layers.empty()) continue;
+    std::vector<double> v;
+    std::istringstream in(line.substr(11));
+    for (std::string item; std::getline(in, item, ',');) v.push_back(std::stod(item));
+    ParsedCli::Polyline poly;
+    poly.id = static_cast<int>(v.at(0));
+    poly.dir = static_cast<int>(v.at(1));
+    const std::size_t n = static_cast<std::size_t>(v.at(2));
+    EXPECT_EQ(v.size(), 3 + 2 * n) << line;
+    for (std::size_t i = 0; i < n; ++i) poly.points.push_back({v.at(3 + 2 * i), v.at(4 + 2 * i)});
+    if (poly.dir != 2) poly.points.pop_back();
+    cli.layers.back().push_back(std::move(poly));
+  }
+  return cli;
+}
+
+// Area of a convex polygon's part with x <= xmax (one Sutherland-Hodgman step).
+double areaLeftOf(const std::vector<Point2d>& poly, double xmax) {
+  std::vector<Point2d> kept;
+  for (std::size_t i = 0; i < poly.size(); ++i) {
+    const Point2d& a = poly[i];
+    const Point2d& b = poly[(i + 1) % poly.size()];
+    if (a.x <= xmax) kept.push_back(a);
+    if ((a.x <= xmax) != (b.x <= xmax))
+      kept.push_back({xmax, a.y + (xmax - a.x) / (b.x - a.x) * (b.y - a.y)});
+  }
+  return signedArea(kept);
+}
+
+// Model: a 20 x 10 x 5 box. Add-on: a 6 x 6 block z 4..7 at y 6..12, half in the model (winding 2) and
+// half beside it. Removal: a 32-sided cylinder r = 2 at (19, 5), z 2..6, reaching 1 mm beyond the
+// model's side (winding -1 there, which the positive rule leaves empty). Planes (from the model's
+// height) every 0.5 mm from 0.25 to 4.75.
+TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea) {
+  writeBinaryStl(path("model.stl"), fixtures::box(0, 0, 0, 20, 10, 5), "model", false);
+  writeBinaryStl(path("knob.stl"), fixtures::box(2, 6, 4, 8, 12, 7), "add-on", false);
+  writeBinaryStl(path("bore.stl"), fixtures::cylinder(19, 5, 2, 32, 2, 6), "removal", false);
+  const RunResult r = run({"slice",
+                           path("model.stl").string(),
+                           "--add",
+                           path("knob.stl").string(),
+                           "--remove",
+                           path("bore.stl").string(),
+                           "-H",
+                           "0.5",
+                           "-o",
+                           path("f.cli").string(),
+                           "-o",
+                           path("f.svg").string(),
+                           "--svg-layers",
+                           "0-last",
+                           "--masks",
+                           path("masks").string(),
+                           "--resolution",
+                           "480x300",
+                           "--pixel",
+                           "0.05",
+                           "--report",
+                           path("r.csv").string(),
+                           "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+
+  const std::string text = readBytes(path("f.cli"));
+  const ParsedCli cli = parseAsciiCli(text);
+  EXPECT_EQ(cli.labels, (std::vector<std::string>{"1,model", "2,add knob", "3,remove bore"}));
+  const auto rows = splitLines(readBytes(path("r.csv")));
+  constexpr std::size_t kLayers = 10;
+  ASSERT_EQ(cli.layers.size(), kLayers);
+  ASSERT_EQ(rows.size(), kLayers + 1);  // the header and one row per layer
+  std::vector<Point2d> section;  // the cylinder's cross-section, counter-clockwise
+  for (int i = 0; i < 32; ++i) {
+    const double a = 2 * std::numbers::pi * i / 32;
+    section.push_back({static_cast<float>(19 + 2 * std::cos(a)), static_cast<float>(5 + 2 * std::sin(a))});
+  }
+  const double bore = signedArea(section), cut = areaLeftOf(section, 20);
+  for (std::size_t k = 0; k < kLayers; ++k) {
+    const double z = 0.25 + 0.5 * static_cast<double>(k);
+    const double expected = z < 2 ? 200 : z < 4 ? 200 - cut : 200 - cut + 12;
+    std::vector<std::vector<Point2d>> loops;
+    double removalArea = 0;
+    int removalLoops = 0;
+    for (const auto& poly : cli.layers[k]) {
+      EXPECT_TRUE(poly.id >= 1 && poly.id <= 3) << poly.id;
+      EXPECT_NE(poly.dir, 2) << "layer " << k;
+      loops.push_back(poly.points);
+      if (poly.id != 3) continue;
+      ++removalLoops;
+      removalArea += signedArea(poly.points);
+      EXPECT_EQ(poly.dir, 0) << "a removal's outer loop, reversed, is clockwise: layer " << k;
+    }
+    // The removal is written reversed: negative area where it is cut.
+    EXPECT_EQ(removalLoops, z > 2 ? 1 : 0) << "layer " << k;
+    if (removalLoops > 0) {
+      EXPECT_NEAR(removalArea, -bore, 1e-4) << "layer " << k;
+    }
+    // The documented rule applied to the parsed CLI: the analytic area and the masks' (the report's).
+    const double rule = fixtures::positiveWindingArea(loops, 0.001);
+    EXPECT_NEAR(rule, expected, 1e-3 * expected) << "layer " << k;
+    const std::string& row = rows[k + 1];
+    const std::size_t c1 = row.find(','), c2 = row.find(',', c1 + 1);
+    const double reported = std::stod(row.substr(c2 + 1));
+    EXPECT_NEAR(rule, reported, 0.01 * expected) << row;
+  }
+
+  // Without features the model's output is what it always was: the same bytes as the feature file
+  // without the features' labels and polylines.
+  const RunResult alone =
+      run({"slice", path("model.stl").string(), "-H", "0.5", "-o", path("m.cli").string(), "-q"});
+  ASSERT_EQ(alone.code(), 0) << alone.describe();
+  std::string filtered;
+  for (const std::string& line : splitLines(text)) {
+    if (line.starts_with("$$LABEL/2,") || line.starts_with("$$LABEL/3,") ||
+        line.starts_with("$$POLYLINE/2,") || line.starts_with("$$POLYLINE/3,"))
+      continue;
+    filtered += line + "\n";
+  }
+  EXPECT_EQ(readBytes(path("m.cli")), filtered);
+
+  // SVG: every panel has a group per part; the removal's group draws its outline.
+  const std::string svg = readBytes(path("f.svg"));
+  std::size_t groups = 0, removals = 0;
+  for (std::size_t at = svg.find("class=\"part "); at != std::string::npos;
+       at = svg.find("class=\"part ", at + 1))
+    ++groups;
+  for (std::size_t at = svg.find("<polygon class=\"remove\""); at != std::string::npos;
+       at = svg.find("<polygon class=\"remove\"", at + 1))
+    ++removals;
+  EXPECT_EQ(groups, 3 * kLayers);
+  EXPECT_EQ(removals, 6u);  // planes 2.25 .. 4.75
+  EXPECT_TRUE(contains(svg, "<title>remove bore</title>"));
   expectNoTemporaries();
 }
 

@@ -204,6 +204,106 @@ TEST(CliWriter, BinaryRoundTrip) {
   EXPECT_EQ(bytes.size(), file.header.size() + 2 * 6 + 4 * 14 + 8 * (5 + 5 + 2 + 4));
 }
 
+// ---- features ---------------------------------------------------------------------------------------
+
+// One layer of three parts at z = 0.5: the model a CCW square 0..10, an add-on CCW square 10..12 x 0..2
+// beside it, a removal a CCW triangle (3,3) (5,3) (3,5) inside the model, with an open piece.
+std::vector<LayerContours> featureParts() {
+  std::vector<LayerContours> parts(3);
+  for (LayerContours& part : parts) part.clear(0.5);
+  for (const Point2d p : {Point2d{0, 0}, Point2d{10, 0}, Point2d{10, 10}, Point2d{0, 10}})
+    parts[0].addPoint(p, 0);
+  parts[0].endLoop(true);
+  for (const Point2d p : {Point2d{10, 0}, Point2d{12, 0}, Point2d{12, 2}, Point2d{10, 2}})
+    parts[1].addPoint(p, 0);
+  parts[1].endLoop(true);
+  for (const Point2d p : {Point2d{3, 3}, Point2d{5, 3}, Point2d{3, 5}}) parts[2].addPoint(p, 0);
+  parts[2].endLoop(true);
+  parts[2].addPoint({1, 1}, 0);
+  parts[2].addPoint({2, 1}, 0);
+  parts[2].addPoint({2, 2}, 0);
+  parts[2].endLoop(false);
+  return parts;
+}
+
+ContourJob featureJob() {
+  ContourJob job = sampleJob();
+  job.layerCount = 1;
+  job.features = {{"knob", PartRole::Add}, {"en/grave", PartRole::Remove}};
+  return job;
+}
+
+TEST(CliWriter, FeaturesAreLabelledPartsAndRemovalsAreReversed) {
+  ScratchDir dir;
+  auto sink = makeCliWriter(dir / "f.cli", featureJob(), false, false);
+  sink->writeLayer(0, featureParts());
+  sink->finish();
+  const std::string expected =
+      "$$HEADERSTART\n"
+      "$$ASCII\n"
+      "$$UNITS/00000001.000000\n"
+      "$$VERSION/200\n"
+      "$$LABEL/1,demo\n"
+      "$$LABEL/2,add knob\n"
+      "$$LABEL/3,remove en_grave\n"
+      "$$DIMENSION/0.000000,0.000000,0.000000,10.000000,10.000000,0.100000\n"
+      "$$LAYERS/1\n"
+      "$$HEADEREND\n"
+      "$$GEOMETRYSTART\n"
+      "$$LAYER/0.500000\n"
+      "$$POLYLINE/1,1,5,0.000000,0.000000,10.000000,0.000000,10.000000,10.000000,0.000000,10.000000,"
+      "0.000000,0.000000\n"
+      "$$POLYLINE/2,1,5,10.000000,0.000000,12.000000,0.000000,12.000000,2.000000,10.000000,2.000000,"
+      "10.000000,0.000000\n"
+      // Reversed from its first point: clockwise as written, so dir 0; the open piece runs backwards.
+      "$$POLYLINE/3,0,4,3.000000,3.000000,3.000000,5.000000,5.000000,3.000000,3.000000,3.000000\n"
+      "$$POLYLINE/3,2,3,2.000000,2.000000,2.000000,1.000000,1.000000,1.000000\n"
+      "$$GEOMETRYEND\n";
+  EXPECT_EQ(readFile(dir / "f.cli"), expected);
+}
+
+TEST(CliWriter, BinaryFeaturesCarryTheirIdsAndTheWindingRuleGivesTheSolid) {
+  ScratchDir dir;
+  auto sink = makeCliWriter(dir / "f.cli", featureJob(), true, false);
+  const auto parts = featureParts();
+  sink->writeLayer(0, parts);
+  sink->finish();
+  const CliFile file = parseBinaryCli(readFile(dir / "f.cli"));
+  EXPECT_NE(file.header.find("$$LABEL/1,demo\n$$LABEL/2,add knob\n$$LABEL/3,remove en_grave\n"),
+            std::string::npos)
+      << file.header;
+  ASSERT_EQ(file.layers.size(), 1u);
+  const auto& polys = file.layers[0].polylines;
+  ASSERT_EQ(polys.size(), 4u);
+  EXPECT_EQ((std::vector<int32_t>{polys[0].id, polys[1].id, polys[2].id, polys[3].id}),
+            (std::vector<int32_t>{1, 2, 3, 3}));
+  EXPECT_EQ((std::vector<int32_t>{polys[0].dir, polys[1].dir, polys[2].dir, polys[3].dir}),
+            (std::vector<int32_t>{1, 1, 0, 2}));
+  // The documented rule on areas: with windings 0 or 1 the solid's area is the sum of the signed areas
+  // of all closed polylines as written: 100 + 4 - 2.
+  double area = 0;
+  for (const CliPolyline& poly : polys) {
+    if (poly.dir == 2) continue;
+    std::vector<Point2d> pts;
+    for (std::size_t i = 0; i + 2 < poly.xy.size(); i += 2) pts.push_back({poly.xy[i], poly.xy[i + 1]});
+    area += signedArea(pts);
+  }
+  EXPECT_DOUBLE_EQ(area, 100.0 + 4.0 - 2.0);
+}
+
+TEST(CliWriter, ModelOnlySpanWritesTheSameBytesAsTheSingleLayerCall) {
+  ScratchDir dir;
+  const auto layers = sampleLayers();
+  for (const bool binary : {false, true}) {
+    auto sink = makeCliWriter(dir / "span.cli", sampleJob(), binary, true);
+    for (uint32_t k = 0; k < layers.size(); ++k)
+      sink->writeLayer(k, std::span<const LayerContours>(&layers[k], 1));
+    sink->finish();
+    writeSample(dir / "one.cli", binary, true);
+    EXPECT_EQ(readFile(dir / "span.cli"), readFile(dir / "one.cli")) << "binary=" << binary;
+  }
+}
+
 TEST(CliWriter, Deterministic) {
   ScratchDir dir;
   for (const bool binary : {false, true}) {

@@ -64,6 +64,71 @@ void writeSample(const fs::path& path, std::vector<uint32_t> chosen, bool overwr
   sink->finish();
 }
 
+// The text between `open` and the next `close` after it; empty when `open` is missing.
+std::string between(const std::string& text, const std::string& open, const std::string& close) {
+  const std::size_t from = text.find(open);
+  if (from == std::string::npos) return {};
+  const std::size_t begin = from + open.size();
+  return text.substr(begin, text.find(close, begin) - begin);
+}
+
+TEST(SvgWriter, FeaturesGetPartGroupsAndTheSolidPathSubtractsRemovals) {
+  ScratchDir dir;
+  ContourJob job = sampleJob(1);
+  job.features = {{"knob", PartRole::Add}, {"slot", PartRole::Remove}};
+  std::vector<LayerContours> parts(3);
+  parts[0] = sampleLayer(0.05);
+  parts[1].clear(0.05);
+  for (const Point2d p : {Point2d{10, 0}, Point2d{12, 0}, Point2d{12, 2}, Point2d{10, 2}})
+    parts[1].addPoint(p, 0);
+  parts[1].endLoop(true);
+  parts[2].clear(0.05);
+  for (const Point2d p : {Point2d{1, 4}, Point2d{2, 4}, Point2d{2, 6}, Point2d{1, 6}})
+    parts[2].addPoint(p, 0);
+  parts[2].endLoop(true);
+  auto sink = makeSvgWriter(dir / "f.svg", job, {0}, false);
+  sink->writeLayer(0, parts);
+  sink->finish();
+  const std::string svg = readFile(dir / "f.svg");
+
+  EXPECT_EQ(
+      countOf(svg, "<g id=\"layer-0-part-1\" class=\"part model\"><title>model demo &lt;part&gt;</title>"),
+      1u);
+  EXPECT_EQ(countOf(svg, "<g id=\"layer-0-part-2\" class=\"part add\"><title>add knob</title>"), 1u);
+  EXPECT_EQ(countOf(svg, "<g id=\"layer-0-part-3\" class=\"part remove\"><title>remove slot</title>"), 1u);
+  // The model's hole and open polyline stay in the model's group; each feature loop is an outline.
+  const std::string model = between(svg, "class=\"part model\">", "</g>");
+  EXPECT_EQ(countOf(model, "class=\"hole\""), 1u);
+  EXPECT_EQ(countOf(model, "class=\"open\""), 1u);
+  EXPECT_EQ(countOf(between(svg, "class=\"part add\">", "</g>"), "<polygon class=\"add\""), 1u);
+  const std::string removal = between(svg, "class=\"part remove\">", "</g>");
+  EXPECT_EQ(countOf(removal, "<polygon class=\"remove\""), 1u);
+  EXPECT_EQ(countOf(removal, "stroke-dasharray"), 1u);
+
+  // Panel origin (0.5, 1.22) with +y up: the removal (1,4) (2,4) (2,6) (1,6) is drawn reversed from its
+  // first point, in its outline and in the solid path, which holds all three parts.
+  const std::string reversed = "1.5,7.22 1.5,5.22 2.5,5.22 2.5,7.22";
+  EXPECT_EQ(between(removal, "points=\"", "\""), reversed);
+  const std::string solid = between(svg, "<path class=\"solid\"", "/>");
+  EXPECT_EQ(countOf(solid, " clip-path=\"url(#clip-layer-0)\""), 1u);
+  EXPECT_EQ(countOf(solid, " fill-rule=\"nonzero\""), 1u);
+  EXPECT_EQ(countOf(solid, "M1.5,7.22 L1.5,5.22 2.5,5.22 2.5,7.22 Z"), 1u);
+  EXPECT_EQ(countOf(solid, "M"), 4u);  // outer, hole, add-on, removal
+  // The clip is the model and add-ons only, so negative winding (a removal beyond them) stays empty.
+  const std::string clip =
+      between(svg, "<clipPath id=\"clip-layer-0\"><path clip-rule=\"nonzero\" d=\"", "\"");
+  EXPECT_EQ(countOf(clip, "M"), 3u);
+  EXPECT_EQ(countOf(clip, "M1.5,7.22"), 0u);
+}
+
+TEST(SvgWriter, WithoutFeaturesNoPartGroupsOrClip) {
+  ScratchDir dir;
+  writeSample(dir / "s.svg", {0, 1});
+  const std::string svg = readFile(dir / "s.svg");
+  EXPECT_EQ(countOf(svg, "class=\"part"), 0u);
+  EXPECT_EQ(countOf(svg, "clip"), 0u);
+}
+
 TEST(SvgWriter, OnePanelPerChosenLayer) {
   ScratchDir dir;
   writeSample(dir / "s.svg", {4, 0, 2, 2, 9});  // unsorted, a duplicate, one out of range

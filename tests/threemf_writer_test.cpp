@@ -8,10 +8,12 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -21,7 +23,10 @@
 #include "core/contours.h"
 #include "io/contours/threemf_writer.h"
 #include "io/errors.h"
+#include "io/readers/stl_writer.h"
 #include "tests/fixtures/scratch_dir.h"
+#include "tests/fixtures/shapes.h"
+#include "tests/fixtures/winding.h"
 
 namespace toposlice {
 namespace {
@@ -181,6 +186,16 @@ struct ReadSlice {
   std::vector<std::vector<DWORD>> polygons;  // startv, then every segment's v2
 };
 
+// One mesh object as lib3mf reads it, with its slice stack.
+struct ReadObject {
+  DWORD id = 0, type = 0, sliceStackId = 0;
+  std::string name;
+  NMR::eModelSlicesMeshResolution resolution = NMR::MODELSLICESMESHRESOLUTION_FULL;
+  std::vector<NMR::MODELMESHVERTEX> vertices;
+  std::vector<NMR::MODELMESHTRIANGLE> triangles;
+  std::vector<ReadSlice> slices;
+};
+
 struct ReadModel {
   bool ok = false;
   DWORD readError = 0;  // lib3mf's error code when it refused the file
@@ -195,6 +210,7 @@ struct ReadModel {
   std::vector<NMR::MODELMESHTRIANGLE> triangles;
   std::vector<DWORD> buildObjectIds;
   std::vector<ReadSlice> slices;
+  std::vector<ReadObject> objects;  // every mesh object in resource order; the fields above are the first's
 };
 
 #define LIB3MF_CHECK(call)                                      \
@@ -236,26 +252,59 @@ ReadModel readWithLib3mf(const fs::path& path) {
   while (hasNext) {
     Lib3mfObject mesh;
     LIB3MF_CHECK(NMR::lib3mf_resourceiterator_getcurrent(meshes.get(), mesh.out()));
-    if (++result.meshObjects == 1) {
-      LIB3MF_CHECK(NMR::lib3mf_object_gettype(mesh.get(), &result.objectType));
-      char name[256] = {};
-      ULONG needed = 0;
-      LIB3MF_CHECK(NMR::lib3mf_object_getnameutf8(mesh.get(), name, sizeof name, &needed));
-      result.objectName = name;
-      LIB3MF_CHECK(NMR::lib3mf_meshobject_getslicestackid(mesh.get(), &result.sliceStackId));
-      LIB3MF_CHECK(NMR::lib3mf_meshobject_getslicesmeshresolution(mesh.get(), &result.resolution));
-      DWORD nv = 0, nt = 0;
-      LIB3MF_CHECK(NMR::lib3mf_meshobject_getvertexcount(mesh.get(), &nv));
-      LIB3MF_CHECK(NMR::lib3mf_meshobject_gettrianglecount(mesh.get(), &nt));
-      result.vertices.resize(nv);
-      result.triangles.resize(nt);
-      if (nv > 0)
-        LIB3MF_CHECK(NMR::lib3mf_meshobject_getvertices(mesh.get(), result.vertices.data(), nv, nullptr));
-      if (nt > 0)
-        LIB3MF_CHECK(
-            NMR::lib3mf_meshobject_gettriangleindices(mesh.get(), result.triangles.data(), nt, nullptr));
+    ++result.meshObjects;
+    ReadObject& o = result.objects.emplace_back();
+    LIB3MF_CHECK(NMR::lib3mf_resource_getresourceid(mesh.get(), &o.id));
+    LIB3MF_CHECK(NMR::lib3mf_object_gettype(mesh.get(), &o.type));
+    char name[256] = {};
+    ULONG needed = 0;
+    LIB3MF_CHECK(NMR::lib3mf_object_getnameutf8(mesh.get(), name, sizeof name, &needed));
+    o.name = name;
+    LIB3MF_CHECK(NMR::lib3mf_meshobject_getslicestackid(mesh.get(), &o.sliceStackId));
+    LIB3MF_CHECK(NMR::lib3mf_meshobject_getslicesmeshresolution(mesh.get(), &o.resolution));
+    DWORD nv = 0, nt = 0;
+    LIB3MF_CHECK(NMR::lib3mf_meshobject_getvertexcount(mesh.get(), &nv));
+    LIB3MF_CHECK(NMR::lib3mf_meshobject_gettrianglecount(mesh.get(), &nt));
+    o.vertices.resize(nv);
+    o.triangles.resize(nt);
+    if (nv > 0) LIB3MF_CHECK(NMR::lib3mf_meshobject_getvertices(mesh.get(), o.vertices.data(), nv, nullptr));
+    if (nt > 0)
+      LIB3MF_CHECK(NMR::lib3mf_meshobject_gettriangleindices(mesh.get(), o.triangles.data(), nt, nullptr));
+    if (o.sliceStackId != 0) {
+      Lib3mfObject stack;
+      LIB3MF_CHECK(NMR::lib3mf_model_getslicestackById(model.get(), o.sliceStackId, stack.out()));
+      DWORD count = 0;
+      LIB3MF_CHECK(NMR::lib3mf_slicestack_getslicecount(stack.get(), &count));
+      for (DWORD i = 0; i < count; ++i) {
+        Lib3mfObject slice;
+        LIB3MF_CHECK(NMR::lib3mf_slicestack_getslice(stack.get(), i, slice.out()));
+        ReadSlice& rs = o.slices.emplace_back();
+        LIB3MF_CHECK(NMR::lib3mf_slice_gettopz(slice.get(), &rs.ztop));
+        DWORD nsv = 0, np = 0;
+        LIB3MF_CHECK(NMR::lib3mf_slice_getvertexcount(slice.get(), &nsv));
+        rs.vertices.resize(nsv);
+        if (nsv > 0) LIB3MF_CHECK(NMR::lib3mf_slice_getvertices(slice.get(), rs.vertices.data(), nsv));
+        LIB3MF_CHECK(NMR::lib3mf_slice_getpolygoncount(slice.get(), &np));
+        for (DWORD p = 0; p < np; ++p) {
+          DWORD ni = 0;
+          LIB3MF_CHECK(NMR::lib3mf_slice_getpolygonindexcount(slice.get(), p, &ni));
+          std::vector<DWORD> indices(ni);
+          if (ni > 0) LIB3MF_CHECK(NMR::lib3mf_slice_getpolygonindices(slice.get(), p, indices.data(), ni));
+          rs.polygons.push_back(std::move(indices));
+        }
+      }
     }
     LIB3MF_CHECK(NMR::lib3mf_resourceiterator_movenext(meshes.get(), &hasNext));
+  }
+  if (!result.objects.empty()) {
+    const ReadObject& first = result.objects.front();
+    result.objectType = first.type;
+    result.objectName = first.name;
+    result.sliceStackId = first.sliceStackId;
+    result.resolution = first.resolution;
+    result.vertices = first.vertices;
+    result.triangles = first.triangles;
+    result.slices = first.slices;
   }
 
   Lib3mfObject items;
@@ -270,37 +319,13 @@ ReadModel readWithLib3mf(const fs::path& path) {
     LIB3MF_CHECK(NMR::lib3mf_builditemiterator_movenext(items.get(), &hasNext));
   }
 
-  if (result.sliceStackId != 0) {
-    Lib3mfObject stack;
-    LIB3MF_CHECK(NMR::lib3mf_model_getslicestackById(model.get(), result.sliceStackId, stack.out()));
-    DWORD count = 0;
-    LIB3MF_CHECK(NMR::lib3mf_slicestack_getslicecount(stack.get(), &count));
-    for (DWORD i = 0; i < count; ++i) {
-      Lib3mfObject slice;
-      LIB3MF_CHECK(NMR::lib3mf_slicestack_getslice(stack.get(), i, slice.out()));
-      ReadSlice s;
-      LIB3MF_CHECK(NMR::lib3mf_slice_gettopz(slice.get(), &s.ztop));
-      DWORD nv = 0, np = 0;
-      LIB3MF_CHECK(NMR::lib3mf_slice_getvertexcount(slice.get(), &nv));
-      s.vertices.resize(nv);
-      if (nv > 0) LIB3MF_CHECK(NMR::lib3mf_slice_getvertices(slice.get(), s.vertices.data(), nv));
-      LIB3MF_CHECK(NMR::lib3mf_slice_getpolygoncount(slice.get(), &np));
-      for (DWORD p = 0; p < np; ++p) {
-        DWORD ni = 0;
-        LIB3MF_CHECK(NMR::lib3mf_slice_getpolygonindexcount(slice.get(), p, &ni));
-        std::vector<DWORD> indices(ni);
-        if (ni > 0) LIB3MF_CHECK(NMR::lib3mf_slice_getpolygonindices(slice.get(), p, indices.data(), ni));
-        s.polygons.push_back(std::move(indices));
-      }
-      result.slices.push_back(std::move(s));
-    }
-  }
   result.ok = true;
   return result;
 }
 
-// Signed volume of the read mesh (divergence theorem); positive for outward-oriented closed meshes.
-double signedVolume(const ReadModel& m) {
+// Signed volume of a read mesh (divergence theorem); positive for outward-oriented closed meshes.
+template <class Mesh>
+double signedVolume(const Mesh& m) {
   double v = 0;
   for (const auto& t : m.triangles) {
     const float* a = m.vertices[t.m_nIndices[0]].m_fPosition;
@@ -575,6 +600,136 @@ TEST(ThreeMfWriter, WeldsCornersAndSkipsDegenerateFacets) {
   EXPECT_EQ(m.triangles.size(), 12u);
   EXPECT_EQ(m.vertices.size(), 10u);  // 8 box corners + the 2 of the skipped facet
   EXPECT_NEAR(signedVolume(m), 100.0, 1e-4);
+}
+
+// Signed area of a read polygon (its index list runs back to startv).
+double polygonArea(const ReadSlice& s, const std::vector<DWORD>& polygon) {
+  std::vector<Point2d> pts;
+  for (std::size_t i = 0; i + 1 < polygon.size(); ++i) {
+    const NMR::MODELSLICEVERTEX& v = s.vertices.at(polygon[i]);
+    pts.push_back({v.m_fPosition[0], v.m_fPosition[1]});
+  }
+  return signedArea(pts);
+}
+
+TEST(ThreeMfWriter, FeaturesAreObjectsOfTheirOwnAndRemovalsAreReversed) {
+  // Model: the 10 x 10 box; add-on: a 2 x 2 block beside it; removal: a 2 x 2 shaft inside the model.
+  const FacetSoup box = boxSoup(0.2f);
+  const std::vector<FacetSoup> features = {fixtures::box(10, 0, 0, 12, 2, 0.2f),
+                                           fixtures::box(3, 3, 0, 5, 5, 0.2f)};
+  const std::vector<Point2d> add = {{10, 0}, {12, 0}, {12, 2}, {10, 2}};
+  const std::vector<Point2d> shaft = {{3, 3}, {5, 3}, {5, 5}, {3, 5}};  // counter-clockwise, as sliced
+  ContourJob job = boxJob(2, 0.2f);
+  job.features = {{"knob", PartRole::Add}, {"shaft", PartRole::Remove}};
+  for (const double h : {0.1, 0.0}) {  // uniform planes, then the same planes without a height
+    ScratchDir dir;
+    const fs::path out = dir / "f.3mf";
+    auto sink = makeThreeMfWriter(out, job, &box, false, h, features);
+    for (uint32_t k = 0; k < 2; ++k) {
+      std::vector<LayerContours> parts(3);
+      for (LayerContours& part : parts) part.clear(0.05 + 0.1 * k);
+      addLoop(parts[0], kOuter, true);
+      addLoop(parts[1], add, true);
+      addLoop(parts[2], shaft, true);
+      sink->writeLayer(k, parts);
+    }
+    sink->finish();
+
+    const ReadModel m = readWithLib3mf(out);
+    ASSERT_TRUE(m.ok) << std::hex << m.readError << " " << m.readMessage;
+    EXPECT_TRUE(m.warningCodes.empty()) << "first warning " << std::hex << m.warningCodes[0];
+    ASSERT_EQ(m.objects.size(), 3u);
+    const std::vector<std::string> names = {"box", "add knob", "remove shaft"};
+    const double volumes[3] = {10.0 * 10.0 * 0.2, 2.0 * 2.0 * 0.2, -2.0 * 2.0 * 0.2};  // removal inside out
+    for (std::size_t p = 0; p < 3; ++p) {
+      const ReadObject& o = m.objects[p];
+      EXPECT_EQ(o.name, names[p]);
+      EXPECT_EQ(o.type, DWORD{NMR::MODELOBJECTTYPE_MODEL});
+      EXPECT_NE(o.sliceStackId, 0u);
+      if (p > 0) {
+        EXPECT_NE(o.sliceStackId, m.objects[p - 1].sliceStackId);
+      }
+      EXPECT_EQ(o.resolution, NMR::MODELSLICESMESHRESOLUTION_FULL);
+      EXPECT_NEAR(signedVolume(o), volumes[p], 1e-4) << names[p];
+      ASSERT_EQ(o.slices.size(), 2u) << names[p];
+      for (std::size_t k = 0; k < 2; ++k) {
+        EXPECT_EQ(o.slices[k].ztop, m.objects[0].slices[k].ztop) << names[p] << " slice " << k;
+        ASSERT_EQ(o.slices[k].polygons.size(), 1u);
+        EXPECT_EQ(o.slices[k].polygons[0], (std::vector<DWORD>{0, 1, 2, 3, 0}));
+      }
+    }
+    // Removals are not printed by a consumer of the build. (lib3mf numbers resources itself: the
+    // file's ids are checked in the text below.)
+    EXPECT_EQ(m.buildObjectIds, (std::vector<DWORD>{m.objects[0].id, m.objects[1].id}));
+    const std::string text = modelText(out);
+    for (const char* tag : {"<s:slicestack id=\"3\" zbottom=\"0\">", "<s:slicestack id=\"5\" zbottom=\"0\">",
+                            "<object id=\"4\" type=\"model\" name=\"add knob\" s:slicestackid=\"3\"",
+                            "<object id=\"6\" type=\"model\" name=\"remove shaft\" s:slicestackid=\"5\"",
+                            "<build>\n<item objectid=\"2\"/>\n<item objectid=\"4\"/>\n</build>"})
+      EXPECT_NE(text.find(tag), std::string::npos) << tag;
+    for (std::size_t k = 0; k < 2; ++k) {
+      const ReadSlice& removal = m.objects[2].slices[k];
+      expectLoop(removal, removal.polygons[0], {shaft[0], shaft[3], shaft[2], shaft[1]});
+      // The documented rule: all objects' polygons at one ztop under positive winding; with windings 0
+      // and 1 only, the solid's area is the sum of their signed areas.
+      double area = 0;
+      for (const ReadObject& o : m.objects) area += polygonArea(o.slices[k], o.slices[k].polygons[0]);
+      EXPECT_NEAR(area, 100.0 + 4.0 - 4.0, 1e-9) << "slice " << k;
+    }
+  }
+}
+
+// The toposlice program on a box with an add-on half sunk into it and a cylinder removal reaching
+// beyond its side (as in cli_tool_test.cpp): the 3MF read back by lib3mf, combined by the documented
+// rule, gives the report's (mask) area on every layer.
+TEST(ThreeMfWriter, ProgramOutputWithFeaturesCombinesToTheReportArea) {
+  ScratchDir dir;
+  writeBinaryStl(dir / "model.stl", fixtures::box(0, 0, 0, 20, 10, 5), "model", false);
+  writeBinaryStl(dir / "knob.stl", fixtures::box(2, 6, 4, 8, 12, 7), "add-on", false);
+  writeBinaryStl(dir / "bore.stl", fixtures::cylinder(19, 5, 2, 32, 2, 6), "removal", false);
+  const char* env = std::getenv("TOPOSLICE_BIN");
+  const std::string program = env != nullptr && *env != '\0' ? env : TOPOSLICE_BIN_PATH;
+  const auto quoted = [](const fs::path& p) { return "'" + p.string() + "'"; };
+  const std::string command = "'" + program + "' slice " + quoted(dir / "model.stl") + " --add " +
+                              quoted(dir / "knob.stl") + " --remove " + quoted(dir / "bore.stl") +
+                              " -H 0.5 -o " + quoted(dir / "f.3mf") + " --masks " + quoted(dir / "masks") +
+                              " --resolution 480x300 --pixel 0.05 --report " + quoted(dir / "r.csv") + " -q";
+  ASSERT_EQ(std::system(command.c_str()), 0) << command;
+
+  const ReadModel m = readWithLib3mf(dir / "f.3mf");
+  ASSERT_TRUE(m.ok) << std::hex << m.readError << " " << m.readMessage;
+  EXPECT_TRUE(m.warningCodes.empty()) << "first warning " << std::hex << m.warningCodes[0];
+  ASSERT_EQ(m.objects.size(), 3u);
+  EXPECT_EQ(m.objects[1].name, "add knob");
+  EXPECT_EQ(m.objects[2].name, "remove bore");
+  EXPECT_EQ(m.buildObjectIds, (std::vector<DWORD>{m.objects[0].id, m.objects[1].id}));
+  EXPECT_LT(signedVolume(m.objects[2]), 0);  // the removal's mesh is inside out
+
+  std::istringstream report(readFile(dir / "r.csv"));
+  std::string row;
+  std::getline(report, row);  // header
+  constexpr std::size_t kLayers = 10;
+  for (const ReadObject& o : m.objects) ASSERT_EQ(o.slices.size(), kLayers) << o.name;
+  for (std::size_t k = 0; k < kLayers; ++k) {
+    std::vector<std::vector<Point2d>> loops;
+    for (const ReadObject& o : m.objects) {
+      const ReadSlice& s = o.slices[k];
+      EXPECT_EQ(s.ztop, m.objects[0].slices[k].ztop);
+      for (const auto& polygon : s.polygons) {
+        std::vector<Point2d>& loop = loops.emplace_back();
+        for (std::size_t i = 0; i + 1 < polygon.size(); ++i)
+          loop.push_back(
+              {s.vertices.at(polygon[i]).m_fPosition[0], s.vertices.at(polygon[i]).m_fPosition[1]});
+        if (&o == &m.objects[2]) {
+          EXPECT_LT(signedArea(loop), 0) << "a removal's loops are reversed: slice " << k;
+        }
+      }
+    }
+    ASSERT_TRUE(std::getline(report, row));
+    const std::size_t c1 = row.find(','), c2 = row.find(',', c1 + 1);
+    const double reported = std::stod(row.substr(c2 + 1));
+    EXPECT_NEAR(fixtures::positiveWindingArea(loops, 0.001), reported, 0.01 * reported) << row;
+  }
 }
 
 TEST(ThreeMfWriter, Deterministic) {

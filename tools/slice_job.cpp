@@ -47,6 +47,7 @@ std::string lowerExtension(const std::filesystem::path& path) {
 
 std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options,
                                                            const ContourJob& job, const FacetSoup& mesh,
+                                                           std::span<const FacetSoup> features,
                                                            double layerHeight) {
   std::vector<std::unique_ptr<ContourSink>> sinks;
   for (const auto& path : options.outputs) {
@@ -60,7 +61,7 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
         throw InputError("--svg-layers '" + options.svgLayers + "': " + error);
       sinks.push_back(makeSvgWriter(path, job, std::move(layers), options.overwrite));
     } else if (ext == ".3mf") {
-      sinks.push_back(makeThreeMfWriter(path, job, &mesh, options.overwrite, layerHeight));
+      sinks.push_back(makeThreeMfWriter(path, job, &mesh, options.overwrite, layerHeight, features));
     } else {
       throw InputError(path.string() + ": unknown contour output type '" + ext +
                        "' (use .cli, .svg or .3mf)");
@@ -455,9 +456,16 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (job.name.size() > 4 && job.name.ends_with(".stl")) job.name.resize(job.name.size() - 4);
   job.bounds = result.bounds;
   job.layerCount = static_cast<uint32_t>(planes.size());
+  const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
+    std::string name = path.stem().string();
+    if (name.size() > 4 && name.ends_with(".stl")) name.resize(name.size() - 4);
+    return name;
+  };
+  for (const auto& path : options.add) job.features.push_back({partName(path), PartRole::Add});
+  for (const auto& path : options.remove) job.features.push_back({partName(path), PartRole::Remove});
   const bool uniform = options.planes.explicitZ.empty();
-  auto sinks =
-      openContourSinks(options, job, soup, uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
+  auto sinks = openContourSinks(options, job, soup, features,
+                                uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
 
   // Masks: grid, sink, and per-slot rasterizer state.
   const bool masks = !options.masks.output.empty();
@@ -548,7 +556,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
                        uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
-    for (auto& sink : sinks) sink->writeLayer(k, layer[0]);
+    for (auto& sink : sinks) sink->writeLayer(k, layer);
     if (maskSink) {
       if (png) {
         maskSink->writePngLayer(k, planes[k], decoded, r.payload, r.crc);

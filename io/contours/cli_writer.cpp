@@ -9,6 +9,7 @@
 #include <string>
 #include <string_view>
 #include <type_traits>
+#include <vector>
 
 #include "io/output_file.h"
 #include "io/text_buffer.h"
@@ -24,7 +25,7 @@ namespace {
 
 constexpr uint16_t kCmdLayerLong = 127;
 constexpr uint16_t kCmdPolylineLong = 130;
-constexpr int32_t kPartId = 1;
+constexpr int32_t kModelId = 1;   // feature i (0-based in job.features) is id i + 2
 constexpr int32_t kDirHole = 0;   // clockwise seen from +z
 constexpr int32_t kDirOuter = 1;  // counter-clockwise seen from +z
 constexpr int32_t kDirOpen = 2;
@@ -64,9 +65,19 @@ char* storeLE(char* p, T value) {
   return p + sizeof(T);
 }
 
-int32_t loopDir(const LayerContours& layer, std::size_t l) {
+// dir of loop l as written: a reversed loop's area has the opposite sign.
+int32_t loopDir(const LayerContours& layer, std::size_t l, bool reversed) {
   if (!layer.loopClosed[l]) return kDirOpen;
-  return signedArea(layer.loopPoints(l)) > 0 ? kDirOuter : kDirHole;
+  const double area = signedArea(layer.loopPoints(l));
+  return (reversed ? -area : area) > 0 ? kDirOuter : kDirHole;
+}
+
+// Point i of a loop of n points in written order. Reversed, a closed loop keeps its first point and
+// runs p0, p(n-1), ..., p1; an open polyline runs from its last point back to its first.
+std::size_t writtenIndex(std::size_t i, std::size_t n, bool closed, bool reversed) {
+  if (!reversed) return i;
+  if (closed) return i == 0 ? 0 : n - i;
+  return n - 1 - i;
 }
 
 // Header text: printable ASCII only; '/' and '$' (CLI comment and command markers) become '_'.
@@ -85,9 +96,18 @@ void appendHeader(ByteBuffer& buf, const ContourJob& job, bool binary) {
   buf.append("$$UNITS/00000001.000000\n");
   buf.append("$$VERSION/200\n");
   buf.append("$$LABEL/");
-  buf.appendInt(kPartId);
+  buf.appendInt(kModelId);
   buf.append(',');
   buf.append(sanitizeLabel(job.name));
+  for (std::size_t i = 0; i < job.features.size(); ++i) {
+    const ContourPart& part = job.features[i];
+    buf.append("\n$$LABEL/");
+    buf.appendInt(kModelId + 1 + static_cast<int64_t>(i));
+    buf.append(',');
+    buf.append(partRoleName(part.role));
+    buf.append(' ');
+    buf.append(sanitizeLabel(part.name));
+  }
   buf.append("\n$$DIMENSION/");
   const float dims[6] = {job.bounds.min.x, job.bounds.min.y, job.bounds.min.z,
                          job.bounds.max.x, job.bounds.max.y, job.bounds.max.z};
@@ -106,20 +126,37 @@ class CliWriter final : public ContourSink {
  public:
   CliWriter(const std::filesystem::path& path, const ContourJob& job, bool binary, bool overwrite)
       : file_(path, overwrite), binary_(binary), layerCount_(job.layerCount) {
+    reversed_.push_back(false);
+    for (const ContourPart& part : job.features) reversed_.push_back(part.role == PartRole::Remove);
     appendHeader(buf_, job, binary_);
     file_.write(buf_.data(), buf_.size());
   }
 
-  void writeLayer(uint32_t index, const LayerContours& layer) override {
+  void writeLayer(uint32_t index, std::span<const LayerContours> parts) override {
     assert(index == nextLayer_ && index < layerCount_);
-    assert(layer.loopClosed.size() == layer.loopCount());
+    assert(parts.size() == reversed_.size());
     (void)index;
     ++nextLayer_;
     buf_.clear();
+    const double z = parts[0].z;
     if (binary_) {
-      encodeBinary(layer);
+      char* p = buf_.reserveMore(2 + 4);
+      p = storeLE(p, kCmdLayerLong);
+      buf_.setEnd(storeLE(p, static_cast<float>(z)));
     } else {
-      encodeAscii(layer);
+      buf_.append("$$LAYER/");
+      buf_.appendFixed(z);
+      buf_.append('\n');
+    }
+    for (std::size_t i = 0; i < parts.size(); ++i) {
+      const LayerContours& layer = parts[i];
+      assert(layer.loopClosed.size() == layer.loopCount());
+      const int32_t id = kModelId + static_cast<int32_t>(i);
+      if (binary_) {
+        encodeBinary(layer, id, reversed_[i]);
+      } else {
+        encodeAscii(layer, id, reversed_[i]);
+      }
     }
     file_.write(buf_.data(), buf_.size());
   }
@@ -131,21 +168,20 @@ class CliWriter final : public ContourSink {
   }
 
  private:
-  void encodeAscii(const LayerContours& layer) {
-    buf_.append("$$LAYER/");
-    buf_.appendFixed(layer.z);
-    buf_.append('\n');
+  // One line per loop of one part.
+  void encodeAscii(const LayerContours& layer, int32_t id, bool reversed) {
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const auto pts = layer.loopPoints(l);
       if (pts.empty()) continue;
       const bool closed = layer.loopClosed[l] != 0;
       buf_.append("$$POLYLINE/");
-      buf_.appendInt(kPartId);
+      buf_.appendInt(id);
       buf_.append(',');
-      buf_.appendInt(loopDir(layer, l));
+      buf_.appendInt(loopDir(layer, l, reversed));
       buf_.append(',');
       buf_.appendInt(static_cast<int64_t>(pts.size() + (closed ? 1 : 0)));
-      for (const Point2d& q : pts) {
+      for (std::size_t i = 0; i < pts.size(); ++i) {
+        const Point2d& q = pts[writtenIndex(i, pts.size(), closed, reversed)];
         buf_.append(',');
         buf_.appendFixed(q.x);
         buf_.append(',');
@@ -161,28 +197,27 @@ class CliWriter final : public ContourSink {
     }
   }
 
-  // Sizes the whole layer first, then fills it in one pass.
-  void encodeBinary(const LayerContours& layer) {
-    constexpr std::size_t kLayerBytes = 2 + 4, kPolylineBytes = 2 + 3 * 4, kPointBytes = 2 * 4;
-    std::size_t bytes = kLayerBytes;
+  // The polylines of one part: sized first, then filled in one pass.
+  void encodeBinary(const LayerContours& layer, int32_t id, bool reversed) {
+    constexpr std::size_t kPolylineBytes = 2 + 3 * 4, kPointBytes = 2 * 4;
+    std::size_t bytes = 0;
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const std::size_t n = layer.loopOffsets[l + 1] - layer.loopOffsets[l];
       if (n > 0) bytes += kPolylineBytes + kPointBytes * (n + (layer.loopClosed[l] ? 1 : 0));
     }
     char* p = buf_.reserveMore(bytes);
     char* const end = p + bytes;
-    p = storeLE(p, kCmdLayerLong);
-    p = storeLE(p, static_cast<float>(layer.z));
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const auto pts = layer.loopPoints(l);
       if (pts.empty()) continue;
       const bool closed = layer.loopClosed[l] != 0;
       assert(pts.size() < static_cast<std::size_t>(INT32_MAX));
       p = storeLE(p, kCmdPolylineLong);
-      p = storeLE(p, kPartId);
-      p = storeLE(p, loopDir(layer, l));
+      p = storeLE(p, id);
+      p = storeLE(p, loopDir(layer, l, reversed));
       p = storeLE(p, static_cast<int32_t>(pts.size() + (closed ? 1 : 0)));
-      for (const Point2d& q : pts) {
+      for (std::size_t i = 0; i < pts.size(); ++i) {
+        const Point2d& q = pts[writtenIndex(i, pts.size(), closed, reversed)];
         p = storeLE(p, static_cast<float>(q.x));
         p = storeLE(p, static_cast<float>(q.y));
       }
@@ -199,6 +234,7 @@ class CliWriter final : public ContourSink {
   bool binary_;
   uint32_t layerCount_;
   uint32_t nextLayer_ = 0;
+  std::vector<bool> reversed_;  // per part: a removal's loops are written reversed
   ByteBuffer buf_;
 };
 

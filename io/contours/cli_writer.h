@@ -2,11 +2,15 @@
 //
 // Header (both variants, '\n' line ends, nothing time- or machine-dependent: same input, same bytes):
 //   $$HEADERSTART / $$ASCII or $$BINARY / $$UNITS/00000001.000000 (coordinates in mm) / $$VERSION/200 /
-//   $$LABEL/1,<name> / $$DIMENSION/x0,y0,z0,x1,y1,z1 / $$LAYERS/<count> / $$HEADEREND
+//   $$LABEL/1,<name> / [$$LABEL/<i+2>,add <feature> or remove <feature>, one per job.features[i]] /
+//   $$DIMENSION/x0,y0,z0,x1,y1,z1 / $$LAYERS/<count> / $$HEADEREND
 // Geometry per layer: a layer command with the cutting-plane height z (layer.z), then one polyline per
-// loop with id 1 and dir 1 = outer (counter-clockwise, signedArea > 0), 0 = hole (clockwise or zero
-// area), 2 = open polyline (loopClosed == 0). Closed loops repeat their first point at the end (n counts
-// it); open polylines do not. Loops without points are skipped.
+// loop, part after part (model, add-ons, removals), with the part's label id and dir 1 = outer
+// (counter-clockwise as written, signed area > 0), 0 = hole (clockwise as written or zero area), 2 = open
+// polyline (loopClosed == 0). A removal's loops are written reversed (a closed loop keeps its first
+// point: p0, p(n-1), ..., p1), so its outer loops are clockwise with dir 0: the layer's solid is where
+// the winding numbers of all closed polylines of all ids add up to more than zero. Closed loops repeat
+// their first point at the end (n counts it); open polylines do not. Loops without points are skipped.
 // ASCII: "$$GEOMETRYSTART", "$$LAYER/z", "$$POLYLINE/1,dir,n,x1,y1,...", "$$GEOMETRYEND"; every number in
 // fixed notation with 6 decimals (1 nm), "-0.000000" written as "0.000000".
 // Binary: follows "$$HEADEREND" directly (no line end); little-endian, unaligned: uint16 127 + float32 z

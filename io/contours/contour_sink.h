@@ -4,28 +4,57 @@
 // (0, 1, ..., layerCount-1), then finish(). A sink writes through an OutputFile, so nothing appears under
 // the final name before finish() returns; a sink destroyed without finish() (error, cancellation) leaves
 // nothing on disk. I/O failures are thrown as OutputError from any of the calls.
+//
+// Parts: a layer is the model's contours followed by those of each feature (job.features, add-ons first,
+// then removals), each sliced on its own at the same plane. The solid of a layer is where the winding
+// numbers of all parts' closed loops, a removal's counted with the opposite sign (winding -1 inside it),
+// add up to more than zero: the positive rule of the masks. Every format writes a removal's loops
+// reversed, so that a reader applies that rule to all written loops as they stand.
 #pragma once
 
 #include <cstdint>
+#include <span>
 #include <string>
+#include <vector>
 
 #include "core/contours.h"
 #include "core/mesh.h"
 
 namespace toposlice {
 
+enum class PartRole : uint8_t { Model, Add, Remove };
+
+// "model", "add" or "remove": the role's word in file labels.
+inline const char* partRoleName(PartRole role) {
+  return role == PartRole::Add ? "add" : role == PartRole::Remove ? "remove" : "model";
+}
+
+// One feature sliced with the model (`toposlice slice --add/--remove`).
+struct ContourPart {
+  std::string name;  // the feature file's stem, sanitized by each format
+  PartRole role = PartRole::Add;
+  // +1 for the model and add-ons, -1 for a removal.
+  int winding() const { return role == PartRole::Remove ? -1 : 1; }
+};
+
 // What a sink knows before the first layer: used for file headers.
 struct ContourJob {
   std::string name;    // model or part name, written into headers (sanitized by each format)
   BoundingBox bounds;  // model bounds in mm
   uint32_t layerCount = 0;
+  // Part 1, 2, ... of every layer (part 0 is the model): add-ons first, then removals. Empty without
+  // features, and then every format writes exactly what it wrote before features existed.
+  std::vector<ContourPart> features;
 };
 
 class ContourSink {
  public:
   virtual ~ContourSink() = default;
-  // Writes layer `index`; called for every layer, in layer order.
-  virtual void writeLayer(uint32_t index, const LayerContours& layer) = 0;
+  // Writes layer `index`; called for every layer, in layer order. `parts` holds 1 + job.features.size()
+  // layers, all at the same z: [0] the model, then the features in job.features order.
+  virtual void writeLayer(uint32_t index, std::span<const LayerContours> parts) = 0;
+  // A job without features: the model's layer alone.
+  void writeLayer(uint32_t index, const LayerContours& model) { writeLayer(index, {&model, 1}); }
   // Completes and commits the file; without finish() nothing is left on disk.
   virtual void finish() = 0;
 };

@@ -17,6 +17,16 @@ constexpr const char* kSolidStroke = "#1f3b73";
 constexpr const char* kHoleStroke = "#d62728";
 constexpr const char* kOpenStroke = "#ff7f0e";
 constexpr const char* kFrameStroke = "#bbbbbb";
+constexpr const char* kAddStroke = "#2ca02c";
+constexpr const char* kRemoveStroke = "#9467bd";
+
+// Point i of a loop of n points as drawn: a removal's loops reversed, a closed loop keeping its first
+// point (p0, p(n-1), ..., p1), an open polyline from its last point to its first.
+std::size_t drawnIndex(std::size_t i, std::size_t n, bool closed, bool reversed) {
+  if (!reversed) return i;
+  if (closed) return i == 0 ? 0 : n - i;
+  return n - 1 - i;
+}
 
 // Fixed notation with `decimals` decimals, trailing zeros trimmed, no "-0".
 void appendNumber(std::string& out, double v, int decimals) {
@@ -37,6 +47,9 @@ class SvgWriter final : public ContourSink {
   SvgWriter(const std::filesystem::path& path, const ContourJob& job, std::vector<uint32_t> layers,
             bool overwrite)
       : file_(path, overwrite), layers_(std::move(layers)), layerCount_(job.layerCount) {
+    parts_.push_back({job.name, PartRole::Model});
+    parts_.insert(parts_.end(), job.features.begin(), job.features.end());
+    for (const ContourPart& part : job.features) hasRemoval_ = hasRemoval_ || part.role == PartRole::Remove;
     std::sort(layers_.begin(), layers_.end());
     layers_.erase(std::unique(layers_.begin(), layers_.end()), layers_.end());
     layers_.erase(std::lower_bound(layers_.begin(), layers_.end(), layerCount_), layers_.end());
@@ -77,14 +90,14 @@ class SvgWriter final : public ContourSink {
     file_.write(s.data(), s.size());
   }
 
-  void writeLayer(uint32_t index, const LayerContours& layer) override {
+  void writeLayer(uint32_t index, std::span<const LayerContours> layers) override {
     assert(index == nextLayer_ && index < layerCount_);
-    assert(layer.loopClosed.size() == layer.loopCount());
+    assert(layers.size() == parts_.size());
     ++nextLayer_;
     if (nextPanel_ == layers_.size() || layers_[nextPanel_] != index) return;
     const std::size_t panel = nextPanel_++;
     text_.clear();
-    appendPanel(panel, index, layer);
+    appendPanel(panel, index, layers);
     file_.write(text_.data(), text_.size());
   }
 
@@ -101,14 +114,44 @@ class SvgWriter final : public ContourSink {
     appendNumber(text_, oy + (maxY_ - p.y), 4);
   }
 
-  void appendPointList(double ox, double oy, std::span<const Point2d> pts) {
+  void appendPointList(double ox, double oy, std::span<const Point2d> pts, bool closed = true,
+                       bool reversed = false) {
     for (std::size_t i = 0; i < pts.size(); ++i) {
       if (i > 0) text_ += ' ';
-      appendPoint(ox, oy, pts[i]);
+      appendPoint(ox, oy, pts[drawnIndex(i, pts.size(), closed, reversed)]);
     }
   }
 
-  void appendPanel(std::size_t panel, uint32_t index, const LayerContours& layer) {
+  bool reversed(std::size_t part) const { return parts_[part].role == PartRole::Remove; }
+
+  // Path data of every closed loop of the parts, a removal's reversed; removals left out when
+  // !withRemovals. `first` says whether nothing has been written to this path yet.
+  void appendLoopsPathData(double ox, double oy, std::span<const LayerContours> layers, bool withRemovals) {
+    bool first = true;
+    for (std::size_t p = 0; p < layers.size(); ++p) {
+      if (!withRemovals && reversed(p)) continue;
+      const LayerContours& layer = layers[p];
+      for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+        const auto pts = layer.loopPoints(l);
+        if (!layer.loopClosed[l] || pts.empty()) continue;
+        if (!first) text_ += ' ';
+        first = false;
+        text_ += 'M';
+        appendPoint(ox, oy, pts[0]);
+        if (pts.size() > 1) {
+          text_ += " L";
+          for (std::size_t i = 1; i < pts.size(); ++i) {
+            if (i > 1) text_ += ' ';
+            appendPoint(ox, oy, pts[drawnIndex(i, pts.size(), true, reversed(p))]);
+          }
+        }
+        text_ += " Z";
+      }
+    }
+  }
+
+  void appendPanel(std::size_t panel, uint32_t index, std::span<const LayerContours> layers) {
+    const LayerContours& layer = layers[0];
     const double cellX = static_cast<double>(panel % columns_) * cellWidth_;
     const double cellY = static_cast<double>(panel / columns_) * cellHeight_;
     const double ox = cellX + margin_, oy = cellY + margin_ + captionHeight_;  // top-left of the drawing
@@ -139,30 +182,35 @@ class SvgWriter final : public ContourSink {
     appendNumber(text_, stroke_ * 0.5, 4);
     text_ += "\"/>\n";
 
-    // All closed loops in one path, so that nonzero winding leaves the holes empty.
-    text_ += "<path class=\"solid\" fill=\"";
+    // With a removal, nonzero alone would also fill where a removal reaches beyond the solid (winding
+    // -1); clipping to the model and add-ons (nonzero) leaves exactly the positive-winding region as
+    // long as removals do not overlap each other inside the solid.
+    if (hasRemoval_) {
+      text_ += "<clipPath id=\"clip-layer-";
+      appendNumber(text_, index, 0);
+      text_ += "\"><path clip-rule=\"nonzero\" d=\"";
+      appendLoopsPathData(ox, oy, layers, false);
+      text_ += "\"/></clipPath>\n";
+    }
+    // All closed loops of all parts in one path, so that nonzero winding leaves the holes (and what
+    // removals take away, their loops being reversed) empty.
+    text_ += "<path class=\"solid\"";
+    if (hasRemoval_) {
+      text_ += " clip-path=\"url(#clip-layer-";
+      appendNumber(text_, index, 0);
+      text_ += ")\"";
+    }
+    text_ += " fill=\"";
     text_ += kSolidFill;
     text_ += "\" fill-rule=\"nonzero\" stroke=\"";
     text_ += kSolidStroke;
     text_ += "\" stroke-width=\"";
     appendNumber(text_, stroke_, 4);
     text_ += "\" stroke-linejoin=\"round\" d=\"";
-    bool first = true;
-    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
-      const auto pts = layer.loopPoints(l);
-      if (!layer.loopClosed[l] || pts.empty()) continue;
-      if (!first) text_ += ' ';
-      first = false;
-      text_ += 'M';
-      appendPoint(ox, oy, pts[0]);
-      if (pts.size() > 1) {
-        text_ += " L";
-        appendPointList(ox, oy, pts.subspan(1));
-      }
-      text_ += " Z";
-    }
+    appendLoopsPathData(ox, oy, layers, true);
     text_ += "\"/>\n";
 
+    if (parts_.size() > 1) appendPartGroupOpen(index, 0);
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const auto pts = layer.loopPoints(l);
       if (pts.empty()) continue;
@@ -187,11 +235,67 @@ class SvgWriter final : public ContourSink {
       appendPointList(ox, oy, pts);
       text_ += "\"/>\n";
     }
+    if (parts_.size() > 1) text_ += "</g>\n";
+    for (std::size_t p = 1; p < layers.size(); ++p) appendFeatureGroup(ox, oy, index, p, layers[p]);
+    text_ += "</g>\n";
+  }
+
+  // <g id="layer-<k>-part-<p+1>" class="part <role>"><title><role> <name></title> (ids as in the CLI).
+  void appendPartGroupOpen(uint32_t index, std::size_t p) {
+    const char* role = partRoleName(parts_[p].role);
+    text_ += "<g id=\"layer-";
+    appendNumber(text_, index, 0);
+    text_ += "-part-";
+    appendNumber(text_, static_cast<double>(p + 1), 0);
+    text_ += "\" class=\"part ";
+    text_ += role;
+    text_ += "\"><title>";
+    text_ += role;
+    text_ += ' ';
+    appendXmlEscaped(
+        text_, parts_[p].name, [](unsigned char c) { return c >= 0x20; }, ' ');
+    text_ += "</title>\n";
+  }
+
+  // A feature's outlines: every closed loop as an unfilled polygon (add-on green, removal purple and
+  // dashed, drawn in the reversed order it has in the solid path), open polylines as for the model.
+  void appendFeatureGroup(double ox, double oy, uint32_t index, std::size_t p, const LayerContours& layer) {
+    appendPartGroupOpen(index, p);
+    const bool removal = reversed(p);
+    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+      const auto pts = layer.loopPoints(l);
+      if (pts.empty()) continue;
+      const bool closed = layer.loopClosed[l] != 0;
+      if (closed) {
+        text_ += removal ? "<polygon class=\"remove\" fill=\"none\" stroke=\""
+                         : "<polygon class=\"add\" fill=\"none\" stroke=\"";
+        text_ += removal ? kRemoveStroke : kAddStroke;
+        text_ += "\" stroke-width=\"";
+        appendNumber(text_, stroke_, 4);
+        if (removal) {
+          text_ += "\" stroke-dasharray=\"";
+          appendNumber(text_, stroke_ * 2, 4);
+          text_ += ',';
+          appendNumber(text_, stroke_ * 2, 4);
+        }
+        text_ += "\" points=\"";
+      } else {
+        text_ += "<polyline class=\"open\" fill=\"none\" stroke=\"";
+        text_ += kOpenStroke;
+        text_ += "\" stroke-width=\"";
+        appendNumber(text_, stroke_ * 1.5, 4);
+        text_ += "\" stroke-linecap=\"round\" points=\"";
+      }
+      appendPointList(ox, oy, pts, closed, removal);
+      text_ += "\"/>\n";
+    }
     text_ += "</g>\n";
   }
 
   OutputFile file_;
-  std::vector<uint32_t> layers_;  // sorted, unique, < layerCount_
+  std::vector<uint32_t> layers_;    // sorted, unique, < layerCount_
+  std::vector<ContourPart> parts_;  // [0] the model (its name and role Model), then job.features
+  bool hasRemoval_ = false;
   uint32_t layerCount_;
   uint32_t nextLayer_ = 0;
   std::size_t nextPanel_ = 0;

@@ -8,6 +8,13 @@
 //     background;
 //   - one <polygon class="hole"> per hole (signedArea <= 0) as a red dashed outline, unfilled;
 //   - one <polyline class="open"> per open polyline, orange, unfilled.
+// With features (job.features), the solid path holds every part's closed loops, a removal's reversed
+// (p0, p(n-1), ..., p1); with a removal it is clipped (<clipPath id="clip-layer-k">, nonzero) to the
+// model's and add-ons' loops, so that a removal reaching beyond them stays empty (positive rule). Then
+// one <g id="layer-k-part-<id>" class="part <role>"><title><role> <name></title> per part (ids as in the
+// CLI: 1 the model, then the features): the model's holes and open lines, an add-on's loops as green
+// <polygon class="add"> outlines, a removal's as purple dashed <polygon class="remove">. Without
+// features none of this is written.
 // Same input, same bytes. Layers not chosen are ignored by writeLayer.
 #pragma once
 

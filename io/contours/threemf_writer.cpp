@@ -14,8 +14,10 @@
 #include <cerrno>
 #include <charconv>
 #include <climits>
+#include <cstdio>
 #include <cstring>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -27,6 +29,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "core/mesh_info.h"
 #include "core/weld.h"
 #include "io/contours/xml_text.h"
 #include "io/errors.h"
@@ -39,8 +42,13 @@ namespace {
 constexpr int kDeflateLevel = 1;  // level 6: about 13% smaller, nearly twice the time
 constexpr std::size_t kFlushBytes = std::size_t{1} << 20;  // text goes to deflate in ~1 MiB pieces
 constexpr double kLoneSlabHalf = 0.0005;                   // mm; see the header
-constexpr uint32_t kSliceStackId = 1;
-constexpr uint32_t kObjectId = 2;
+// Part p (0 the model, then job.features) has slice stack 2p + 1 and object 2p + 2.
+constexpr uint32_t sliceStackId(std::size_t p) {
+  return static_cast<uint32_t>(2 * p + 1);
+}
+constexpr uint32_t objectId(std::size_t p) {
+  return static_cast<uint32_t>(2 * p + 2);
+}
 
 constexpr std::string_view kContentTypes =
     "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
@@ -108,6 +116,18 @@ bool hasProperFacet(const FacetSoup& soup) {
   return false;
 }
 
+// Point i of a loop of n points in the order it is written: a removal's loops reversed, a closed loop
+// keeping its first point (p0, p(n-1), ..., p1), an open polyline from its last point to its first.
+std::size_t writtenIndex(std::size_t i, std::size_t n, bool closed, bool reversed) {
+  if (!reversed) return i;
+  if (closed) return i == 0 ? 0 : n - i;
+  return n - 1 - i;
+}
+
+struct FileCloser {
+  void operator()(std::FILE* f) const { std::fclose(f); }
+};
+
 uint64_t getLE(const uint8_t* p, int bytes) {
   uint64_t v = 0;
   for (int i = bytes - 1; i >= 0; --i) v = v << 8 | p[i];
@@ -172,16 +192,40 @@ std::string zipErrorText(int code) {
   return code == ZIP_ERRNO ? std::generic_category().message(errno) : "zip error " + std::to_string(code);
 }
 
+// One part's slice stack while it is written, and what its object needs.
+struct Part {
+  const FacetSoup* mesh = nullptr;  // may be null
+  bool lowres = true;               // no mesh with a proper facet: a bounding box stands in
+  bool reversed = false;            // a removal: loops and triangles written reversed
+  Text body;                        // the current layer's <s:vertices> and <s:polygon>s
+  Text pending;                     // without a layer height: the previous layer's body, waiting for its ztop
+  Text text;                        // a feature's stack text not yet in its spool file
+  std::unique_ptr<std::FILE, FileCloser> spool;  // a feature's stack, copied into the model by finish()
+};
+
 class ThreeMfWriter final : public ContourSink {
  public:
   ThreeMfWriter(const std::filesystem::path& path, const ContourJob& job, const FacetSoup* mesh,
-                bool overwrite, double layerHeight)
-      : file_(path, overwrite),
-        job_(job),
-        mesh_(mesh),
-        layerHeight_(layerHeight),
-        lowres_(mesh == nullptr || !hasProperFacet(*mesh)) {
+                bool overwrite, double layerHeight, std::span<const FacetSoup> featureMeshes)
+      : file_(path, overwrite), job_(job), layerHeight_(layerHeight), parts_(1 + job.features.size()) {
     assert(layerHeight >= 0);
+    assert(featureMeshes.empty() || featureMeshes.size() == job.features.size());
+    bool lowres = false;
+    for (std::size_t p = 0; p < parts_.size(); ++p) {
+      Part& part = parts_[p];
+      part.mesh = p == 0 ? mesh : featureMeshes.empty() ? nullptr : &featureMeshes[p - 1];
+      part.lowres = part.mesh == nullptr || !hasProperFacet(*part.mesh);
+      part.reversed = p > 0 && job.features[p - 1].role == PartRole::Remove;
+      lowres = lowres || part.lowres;
+      if (p == 0) continue;
+      // A feature's stack is spooled to an unnamed temporary file and copied into the model entry by
+      // finish(): minizip writes one entry at a time, and the model's stack streams into it meanwhile.
+      part.spool.reset(std::tmpfile());
+      if (!part.spool) {
+        throw OutputError(path.string() + ": cannot create a temporary file for feature '" +
+                          job.features[p - 1].name + "': " + std::generic_category().message(errno));
+      }
+    }
     // minizip writes the temporary through its own handle (it seeks back to complete each local
     // header); file_ owns the name, its removal when abandoned (signals included) and the final rename.
     zip_.reset(zipOpen64(file_.tempPath().c_str(), APPEND_STATUS_CREATE));
@@ -199,49 +243,64 @@ class ThreeMfWriter final : public ContourSink {
         "<model unit=\"millimeter\" xml:lang=\"en-US\" "
         "xmlns=\"http://schemas.microsoft.com/3dmanufacturing/core/2015/02\" "
         "xmlns:s=\"http://schemas.microsoft.com/3dmanufacturing/slice/2015/07\"");
-    out_.append(lowres_ ? " requiredextensions=\"s\">\n" : ">\n");
+    out_.append(lowres ? " requiredextensions=\"s\">\n" : ">\n");
     out_.append("<metadata name=\"Application\">toposlice</metadata>\n<resources>\n");
   }
 
-  void writeLayer(uint32_t index, const LayerContours& layer) override {
+  void writeLayer(uint32_t index, std::span<const LayerContours> layers) override {
     assert(index == next_ && index < job_.layerCount);
-    assert(layer.loopClosed.size() == layer.loopCount());
+    assert(layers.size() == parts_.size());
     ++next_;
-    body_.clear();
-    encodeSliceBody(layer, body_);
-    if (layerHeight_ > 0) {
-      if (index == 0) openStack(layer.z - layerHeight_ / 2);
-      emitSlice(layer.z + layerHeight_ / 2, body_);
-      return;
+    const double z = layers[0].z;
+    for (std::size_t p = 0; p < parts_.size(); ++p) {
+      Part& part = parts_[p];
+      assert(layers[p].loopClosed.size() == layers[p].loopCount());
+      part.body.clear();
+      encodeSliceBody(layers[p], part.reversed, part.body);
+      if (layerHeight_ > 0) {
+        if (index == 0) openStack(p, z - layerHeight_ / 2);
+        emitSlice(p, z + layerHeight_ / 2, part.body);
+        continue;
+      }
+      // Uneven planes: slice k's ztop is known once plane k+1 has arrived.
+      if (index > 0) {
+        if (index == 1) openStack(p, pendingZ_ - (z - pendingZ_) / 2);
+        emitSlice(p, (pendingZ_ + z) / 2, part.pending);
+      }
+      part.pending.swap(part.body);
     }
-    // Uneven planes: slice k's ztop is known once plane k+1 has arrived.
-    if (index > 0) {
-      if (index == 1) openStack(pendingZ_ - (layer.z - pendingZ_) / 2);
-      emitSlice((pendingZ_ + layer.z) / 2, pending_);
-    }
-    pending_.swap(body_);
+    if (layerHeight_ > 0) return;
     previousZ_ = pendingZ_;
-    pendingZ_ = layer.z;
+    pendingZ_ = z;
   }
 
   void finish() override {
     assert(next_ == job_.layerCount);
-    if (next_ == 0) {
-      openStack(static_cast<double>(job_.bounds.min.z));
-    } else if (layerHeight_ <= 0) {
-      double half = (pendingZ_ - previousZ_) / 2;
-      if (next_ == 1) {
-        half = pendingZ_ - static_cast<double>(job_.bounds.min.z);
-        if (!(half > 0)) half = kLoneSlabHalf;
-        openStack(pendingZ_ - half);
+    for (std::size_t p = 0; p < parts_.size(); ++p) {
+      if (next_ == 0) {
+        openStack(p, static_cast<double>(job_.bounds.min.z));
+      } else if (layerHeight_ <= 0) {
+        double half = (pendingZ_ - previousZ_) / 2;
+        if (next_ == 1) {
+          half = pendingZ_ - static_cast<double>(job_.bounds.min.z);
+          if (!(half > 0)) half = kLoneSlabHalf;
+          openStack(p, pendingZ_ - half);
+        }
+        emitSlice(p, pendingZ_ + half, parts_[p].pending);
       }
-      emitSlice(pendingZ_ + half, pending_);
+      stackText(p).append("</s:slicestack>\n");
     }
-    out_.append("</s:slicestack>\n");
-    writeObject();
-    out_.append("</resources>\n<build>\n<item objectid=\"");
-    out_.appendUint(kObjectId);
-    out_.append("\"/>\n</build>\n</model>\n");
+    for (std::size_t p = 1; p < parts_.size(); ++p) copySpool(p);
+    for (std::size_t p = 0; p < parts_.size(); ++p) writeObject(p);
+    out_.append("</resources>\n<build>\n");
+    // Removals are resources only: a consumer printing the build must not print them as solids.
+    for (std::size_t p = 0; p < parts_.size(); ++p) {
+      if (parts_[p].reversed) continue;
+      out_.append("<item objectid=\"");
+      out_.appendUint(objectId(p));
+      out_.append("\"/>\n");
+    }
+    out_.append("</build>\n</model>\n");
     flushText();
     int rc = zipCloseFileInZip(zip_.get());
     if (rc != ZIP_OK) fail("cannot write 3D/3dmodel.model", rc);
@@ -290,35 +349,73 @@ class ThreeMfWriter final : public ContourSink {
     if (out_.size() >= kFlushBytes) flushText();
   }
 
-  void openStack(double zbottom) {
-    out_.append("<s:slicestack id=\"");
-    out_.appendUint(kSliceStackId);
-    out_.append("\" zbottom=\"");
-    out_.appendDecimal(zbottom);
-    out_.append("\">\n");
+  // Part p's stack text: the model's goes to the model entry (out_), a feature's to its spool file.
+  Text& stackText(std::size_t p) { return p == 0 ? out_ : parts_[p].text; }
+
+  void writeToStack(std::size_t p, const char* data, std::size_t size) {
+    if (p == 0) return writeToEntry(data, size);
+    if (size > 0 && std::fwrite(data, 1, size, parts_[p].spool.get()) != size) failSpool(p);
   }
 
-  void emitSlice(double ztop, const Text& body) {
-    out_.append("<s:slice ztop=\"");
-    out_.appendDecimal(ztop);
-    if (body.empty()) {
-      out_.append("\"/>\n");
-    } else {
-      out_.append("\">\n");
-      if (body.size() >= kFlushBytes) {  // a large layer goes to deflate directly, not via a copy
-        flushText();
-        writeToEntry(body.data(), body.size());
-      } else {
-        out_.append(body);
-      }
-      out_.append("</s:slice>\n");
+  void flushStack(std::size_t p) {
+    Text& text = stackText(p);
+    writeToStack(p, text.data(), text.size());
+    text.clear();
+  }
+
+  [[noreturn]] void failSpool(std::size_t p) {
+    throw OutputError(file_.finalPath().string() + ": cannot spool the slices of feature '" +
+                      job_.features[p - 1].name + "': " + std::generic_category().message(errno));
+  }
+
+  // Appends feature p's spooled stack to the model entry.
+  void copySpool(std::size_t p) {
+    flushStack(p);
+    std::FILE* spool = parts_[p].spool.get();
+    if (std::fflush(spool) != 0 || std::fseek(spool, 0, SEEK_SET) != 0) failSpool(p);
+    flushText();
+    std::vector<char> chunk(kFlushBytes);
+    for (;;) {
+      const std::size_t got = std::fread(chunk.data(), 1, chunk.size(), spool);
+      writeToEntry(chunk.data(), got);
+      if (got < chunk.size()) break;
     }
-    flushIfLarge();
+    if (std::ferror(spool)) failSpool(p);
+    parts_[p].spool.reset();
+  }
+
+  void openStack(std::size_t p, double zbottom) {
+    Text& out = stackText(p);
+    out.append("<s:slicestack id=\"");
+    out.appendUint(sliceStackId(p));
+    out.append("\" zbottom=\"");
+    out.appendDecimal(zbottom);
+    out.append("\">\n");
+  }
+
+  void emitSlice(std::size_t p, double ztop, const Text& body) {
+    Text& out = stackText(p);
+    out.append("<s:slice ztop=\"");
+    out.appendDecimal(ztop);
+    if (body.empty()) {
+      out.append("\"/>\n");
+    } else {
+      out.append("\">\n");
+      if (body.size() >= kFlushBytes) {  // a large layer goes to deflate directly, not via a copy
+        flushStack(p);
+        writeToStack(p, body.data(), body.size());
+      } else {
+        out.append(body);
+      }
+      out.append("</s:slice>\n");
+    }
+    if (out.size() >= kFlushBytes) flushStack(p);
   }
 
   // <s:vertices> then one <s:polygon> per loop of 2 or more points; nothing for a layer without such
   // loops. Vertex i of the slice is point i of the kept loops, in loop order.
-  void encodeSliceBody(const LayerContours& layer, Text& text) const {
+  // A reversed part's loops are written reversed (writtenIndex); the index lists do not change.
+  void encodeSliceBody(const LayerContours& layer, bool reversed, Text& text) const {
     std::size_t kept = 0;
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const std::size_t n = layer.loopOffsets[l + 1] - layer.loopOffsets[l];
@@ -333,7 +430,8 @@ class ThreeMfWriter final : public ContourSink {
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const auto pts = layer.loopPoints(l);
       if (pts.size() < 2) continue;
-      for (const Point2d& q : pts) {
+      for (std::size_t i = 0; i < pts.size(); ++i) {
+        const Point2d& q = pts[writtenIndex(i, pts.size(), layer.loopClosed[l] != 0, reversed)];
         text.append("<s:vertex x=\"");
         text.appendDecimal(q.x);
         text.append("\" y=\"");
@@ -387,18 +485,33 @@ class ThreeMfWriter final : public ContourSink {
     flushIfLarge();
   }
 
-  void writeObject() {
+  // A triangle as written: a removal's triangles reversed (inside out, like its loops).
+  void appendPartTriangle(const Part& part, uint32_t a, uint32_t b, uint32_t c) {
+    if (part.reversed) std::swap(b, c);
+    appendTriangle(a, b, c);
+  }
+
+  // Object of part p: the model's named after the job, a feature's "add <name>" or "remove <name>".
+  void writeObject(std::size_t p) {
+    const Part& part = parts_[p];
     out_.append("<object id=\"");
-    out_.appendUint(kObjectId);
+    out_.appendUint(objectId(p));
     out_.append("\" type=\"model\" name=\"");
-    out_.append(xmlName(job_.name));
+    if (p == 0) {
+      out_.append(xmlName(job_.name));
+    } else {
+      const ContourPart& feature = job_.features[p - 1];
+      out_.append(xmlName(std::string(partRoleName(feature.role)) + " " + feature.name));
+    }
     out_.append("\" s:slicestackid=\"");
-    out_.appendUint(kSliceStackId);
-    out_.append(lowres_ ? "\" s:meshresolution=\"lowres\">\n" : "\" s:meshresolution=\"fullres\">\n");
+    out_.appendUint(sliceStackId(p));
+    out_.append(part.lowres ? "\" s:meshresolution=\"lowres\">\n" : "\" s:meshresolution=\"fullres\">\n");
     out_.append("<mesh>\n<vertices>\n");
-    if (lowres_) {
+    if (part.lowres) {
       // Corner i of the bounding box takes max x when bit 0 is set, max y for bit 1, max z for bit 2.
-      const BoundingBox& b = job_.bounds;
+      // The box of a feature's own facets when it has any, else the model's.
+      const bool ownBox = p > 0 && part.mesh != nullptr && !part.mesh->corners.empty();
+      const BoundingBox b = ownBox ? boundsOf(part.mesh->corners) : job_.bounds;
       for (uint32_t i = 0; i < 8; ++i) {
         appendVertex({(i & 1) ? b.max.x : b.min.x, (i & 2) ? b.max.y : b.min.y, (i & 4) ? b.max.z : b.min.z});
       }
@@ -407,15 +520,15 @@ class ThreeMfWriter final : public ContourSink {
       static constexpr uint32_t kBox[12][3] = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6},
                                                {0, 1, 5}, {0, 5, 4}, {2, 6, 7}, {2, 7, 3},
                                                {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
-      for (const auto& t : kBox) appendTriangle(t[0], t[1], t[2]);
+      for (const auto& t : kBox) appendPartTriangle(part, t[0], t[1], t[2]);
     } else {
-      const IndexedMesh welded = weldCorners(mesh_->corners);
-      for (const Point3f& p : welded.vertices) appendVertex(p);
+      const IndexedMesh welded = weldCorners(part.mesh->corners);
+      for (const Point3f& v : welded.vertices) appendVertex(v);
       out_.append("</vertices>\n<triangles>\n");
       const std::vector<uint32_t>& fv = welded.facetVertices;
       for (std::size_t f = 0; f + 2 < fv.size(); f += 3) {
         if (fv[f] != fv[f + 1] && fv[f + 1] != fv[f + 2] && fv[f] != fv[f + 2])
-          appendTriangle(fv[f], fv[f + 1], fv[f + 2]);
+          appendPartTriangle(part, fv[f], fv[f + 1], fv[f + 2]);
       }
     }
     out_.append("</triangles>\n</mesh>\n</object>\n");
@@ -423,15 +536,12 @@ class ThreeMfWriter final : public ContourSink {
 
   OutputFile file_;  // declared first: destroyed last, after zip_ has closed its handle
   ContourJob job_;
-  const FacetSoup* mesh_;
   double layerHeight_;
-  bool lowres_;
+  std::vector<Part> parts_;  // [0] the model, then job_.features
   // Closed also without finish(); file_ then removes the temporary.
   std::unique_ptr<std::remove_pointer_t<zipFile>, ZipCloser> zip_;
   zip_fileinfo info_{};
-  Text out_;      // model text not yet handed to deflate
-  Text body_;     // the current layer's <s:vertices> and <s:polygon>s
-  Text pending_;  // without a layer height: the previous layer's body, waiting for its ztop
+  Text out_;  // model text not yet handed to deflate
   double pendingZ_ = 0;
   double previousZ_ = 0;
   uint32_t next_ = 0;
@@ -440,8 +550,9 @@ class ThreeMfWriter final : public ContourSink {
 }  // namespace
 
 std::unique_ptr<ContourSink> makeThreeMfWriter(const std::filesystem::path& path, const ContourJob& job,
-                                               const FacetSoup* mesh, bool overwrite, double layerHeight) {
-  return std::make_unique<ThreeMfWriter>(path, job, mesh, overwrite, layerHeight);
+                                               const FacetSoup* mesh, bool overwrite, double layerHeight,
+                                               std::span<const FacetSoup> featureMeshes) {
+  return std::make_unique<ThreeMfWriter>(path, job, mesh, overwrite, layerHeight, featureMeshes);
 }
 
 }  // namespace toposlice

@@ -21,15 +21,26 @@
 //   be regenerated from it). Without a mesh, or when no facet has three distinct corners, the 12
 //   triangles of job.bounds, meshresolution "lowres" and requiredextensions="s", as the extension
 //   demands for low-resolution meshes. Mesh coordinates: the float32 values, shortest exact form.
+// - Features (job.features, part p = 1, 2, ...): after the model's stack, one <s:slicestack id="2p+1">
+//   per feature with a slice at every ztop of the model's, then after the model's object one object
+//   id="2p+2" per feature (name "add <feature>" / "remove <feature>") with its own mesh from
+//   `featureMeshes` (lowres: its own bounding box). A removal's loops are written reversed (a closed
+//   loop keeps its first point: p0, p(n-1), ..., p1) and its triangles reversed (v1 v3 v2): inside it
+//   the winding is -1. The solid at a ztop is where the winding numbers of all objects' polygons at that
+//   ztop add up to more than zero. Build items: the model and each add-on; removals are resources only,
+//   so that a consumer printing the build never prints them as solids.
 //
 // Streaming: the model entry is deflated into the archive while layers arrive (minizip); memory is one
 // layer's text plus about 1 MiB of output (one more layer without h: the slice tag waits for the next
-// plane), independent of the layer count. The archive is written under OutputFile's temporary name and
-// renamed by finish(). Same input, same bytes (for the same zlib: deflate level 1).
+// plane), independent of the layer count. A feature's stack goes to an unnamed temporary file
+// (tmpfile(), about 1 MiB buffered per feature) and is copied into the model entry by finish(). The archive
+// is written under OutputFile's temporary name and renamed by finish(). Same input, same bytes (for the same
+// zlib: deflate level 1).
 #pragma once
 
 #include <filesystem>
 #include <memory>
+#include <span>
 
 #include "core/mesh.h"
 #include "io/contours/contour_sink.h"
@@ -40,8 +51,10 @@ namespace toposlice {
 // the uniform layer height h of the planes (> 0), or 0 when the planes are not uniform or h is unknown.
 // Throws OutputError when the file exists and !overwrite, or cannot be created; I/O failures of
 // writeLayer()/finish() are OutputErrors naming the file.
+// `featureMeshes`: empty, or one soup per job.features entry (same order), each also read by finish().
 std::unique_ptr<ContourSink> makeThreeMfWriter(const std::filesystem::path& path, const ContourJob& job,
                                                const FacetSoup* mesh, bool overwrite,
-                                               double layerHeight = 0.0);
+                                               double layerHeight = 0.0,
+                                               std::span<const FacetSoup> featureMeshes = {});
 
 }  // namespace toposlice
