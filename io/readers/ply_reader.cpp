@@ -133,8 +133,7 @@ Header parseHeader(std::string_view text, const std::string& name) {
   bool haveFormat = false;
   while (true) {
     if (!lines.next(line)) {
-      throwInputError(
-          name, "PLY header line " + std::to_string(lines.number()) + ": the file ends before 'end_header'");
+      throwInputError(name, "PLY header: the file ends before 'end_header'");
     }
     splitWords(line, words);
     if (words.empty() || words[0] == "comment" || words[0] == "obj_info") continue;
