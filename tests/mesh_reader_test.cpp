@@ -16,9 +16,9 @@
 #include <string>
 #include <vector>
 
-#include "Model/COM/NMR_DLLInterfaces.h"
 #include "core/mesh_info.h"
 #include "io/errors.h"
+#include "io/readers/lib3mf_handle.h"
 #include "io/readers/stl_reader.h"
 #include "tests/fixtures/scratch_dir.h"
 
@@ -275,21 +275,6 @@ TEST(MeshReader, ObjErrorsNameTheFaceOrVertex) {
 }
 
 // ---- 3MF, written with lib3mf -------------------------------------------------------------------------
-
-class Lib3mfHandle {
- public:
-  Lib3mfHandle() = default;
-  Lib3mfHandle(const Lib3mfHandle&) = delete;
-  Lib3mfHandle& operator=(const Lib3mfHandle&) = delete;
-  ~Lib3mfHandle() {
-    if (p_ != nullptr) NMR::lib3mf_release(p_);
-  }
-  NMR::PLib3MFBase* get() const { return p_; }
-  NMR::PLib3MFBase** out() { return &p_; }
-
- private:
-  NMR::PLib3MFBase* p_ = nullptr;
-};
 
 NMR::MODELTRANSFORM translation(float x, float y, float z) {
   NMR::MODELTRANSFORM t{};

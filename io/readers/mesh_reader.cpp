@@ -126,38 +126,35 @@ void scaleSoup(FacetSoup& soup, double factor, const std::string& name) {
 
 FacetSoup parseInflated(std::span<const std::byte> bytes, const std::string& name,
                         const MeshReadOptions& options, MeshSource& source) {
-  const double fileUnit = options.unitMm.value_or(1.0);
+  FacetSoup soup;
   switch (detect(bytes)) {
     case Detected::kStl: {
       source.format = MeshFormat::Stl;
       StlSource stl;
-      FacetSoup soup = parseStlUncompressed(bytes, name, &stl);
+      soup = parseStlUncompressed(bytes, name, &stl);
       source.binary = stl.binary;
       source.name = stl.solidName;
-      scaleSoup(soup, fileUnit * options.scale, name);
-      return soup;
+      break;
     }
     case Detected::kPly: {
       source.format = MeshFormat::Ply;
       PlySource ply;
-      FacetSoup soup = parsePly(bytes, name, &ply);
+      soup = parsePly(bytes, name, &ply);
       source.binary = ply.binary;
       source.polygonsTriangulated = ply.polygonsTriangulated;
-      scaleSoup(soup, fileUnit * options.scale, name);
-      return soup;
+      break;
     }
     case Detected::kObj: {
       source.format = MeshFormat::Obj;
       ObjSource obj;
-      FacetSoup soup = parseObj(bytes, name, &obj);
+      soup = parseObj(bytes, name, &obj);
       source.polygonsTriangulated = obj.polygonsTriangulated;
-      scaleSoup(soup, fileUnit * options.scale, name);
-      return soup;
+      break;
     }
     case Detected::kThreeMf: {
       source.format = MeshFormat::ThreeMf;
       ThreeMfSource threeMf;
-      FacetSoup soup = parseThreeMf(bytes, name, options.scale, &threeMf);
+      soup = parseThreeMf(bytes, name, options.scale, &threeMf);  // converted to mm and scaled
       source.name = threeMf.objectName;
       source.fileUnit = threeMf.unit;
       if (options.unitMm) {
@@ -166,9 +163,10 @@ FacetSoup parseInflated(std::span<const std::byte> bytes, const std::string& nam
       return soup;
     }
     case Detected::kNotMesh:
-      break;
+      throwInputError(name, "not a mesh file (toposlice reads STL, PLY, OBJ and 3MF, recognised by content)");
   }
-  throwInputError(name, "not a mesh file (toposlice reads STL, PLY, OBJ and 3MF, recognised by content)");
+  scaleSoup(soup, options.unitMm.value_or(1.0) * options.scale, name);
+  return soup;
 }
 
 }  // namespace

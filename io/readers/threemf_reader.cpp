@@ -8,27 +8,12 @@
 
 #include "Model/COM/NMR_DLLInterfaces.h"
 #include "io/readers/byte_input.h"
+#include "io/readers/lib3mf_handle.h"
 
 namespace toposlice {
 namespace {
 
 constexpr int kMaxComponentDepth = 32;
-
-// Owns one lib3mf object handle.
-class Handle {
- public:
-  Handle() = default;
-  Handle(const Handle&) = delete;
-  Handle& operator=(const Handle&) = delete;
-  ~Handle() {
-    if (p_ != nullptr) NMR::lib3mf_release(p_);
-  }
-  NMR::PLib3MFBase* get() const { return p_; }
-  NMR::PLib3MFBase** out() { return &p_; }
-
- private:
-  NMR::PLib3MFBase* p_ = nullptr;
-};
 
 // Row-major 3x4 affine map, x' = m[0][0] x + m[0][1] y + m[0][2] z + m[0][3] (lib3mf's MODELTRANSFORM
 // layout).
@@ -71,7 +56,7 @@ class Reader {
       : name_(name), factor_(factor), source_(source), soup_(soup) {}
 
   void read(std::span<const std::byte> bytes) {
-    Handle model, reader;
+    Lib3mfHandle model, reader;
     check(NMR::lib3mf_createmodel(model.out()), nullptr, "cannot create a lib3mf model");
     check(NMR::lib3mf_model_queryreader(model.get(), "3mf", reader.out()), model.get(),
           "cannot create a reader");
@@ -84,24 +69,18 @@ class Reader {
     check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
     setUnit(unit);
 
-    Handle items;
+    Lib3mfHandle items;
     check(NMR::lib3mf_model_getbuilditems(model.get(), items.out()), model.get(), "build items");
     BOOL more = false;
     check(NMR::lib3mf_builditemiterator_movenext(items.get(), &more), items.get(), "build items");
     bool first = true;
     while (more) {
-      Handle item, object;
+      Lib3mfHandle item, object;
       check(NMR::lib3mf_builditemiterator_getcurrent(items.get(), item.out()), items.get(), "build item");
       check(NMR::lib3mf_builditem_getobjectresource(item.get(), object.out()), item.get(),
             "build item object");
-      BOOL hasTransform = false;
-      check(NMR::lib3mf_builditem_hasobjecttransform(item.get(), &hasTransform), item.get(), "build item");
-      Affine placement = identity();
-      if (hasTransform) {
-        NMR::MODELTRANSFORM t;
-        check(NMR::lib3mf_builditem_getobjecttransform(item.get(), &t), item.get(), "build item transform");
-        placement = fromLib3mf(t);
-      }
+      const Affine placement = transformOf(item.get(), NMR::lib3mf_builditem_hasobjecttransform,
+                                           NMR::lib3mf_builditem_getobjecttransform, "build item transform");
       if (first) source_.objectName = objectName(object.get());
       first = false;
       addObject(object.get(), placement, 0);
@@ -111,6 +90,18 @@ class Reader {
   }
 
  private:
+  // The transform of a build item or component (`has` and `get` are lib3mf's functions for it), identity
+  // when it states none.
+  Affine transformOf(NMR::PLib3MFBase* owner, LIB3MFRESULT (*has)(NMR::PLib3MFBase*, BOOL*),
+                     LIB3MFRESULT (*get)(NMR::PLib3MFBase*, NMR::MODELTRANSFORM*), const char* what) const {
+    BOOL hasTransform = false;
+    check(has(owner, &hasTransform), owner, what);
+    if (!hasTransform) return identity();
+    NMR::MODELTRANSFORM t;
+    check(get(owner, &t), owner, what);
+    return fromLib3mf(t);
+  }
+
   void setUnit(DWORD unit) {
     struct Unit {
       const char* name;
@@ -142,19 +133,12 @@ class Reader {
     DWORD count = 0;
     check(NMR::lib3mf_componentsobject_getcomponentcount(object, &count), object, "components");
     for (DWORD i = 0; i < count; ++i) {
-      Handle component, child;
+      Lib3mfHandle component, child;
       check(NMR::lib3mf_componentsobject_getcomponent(object, i, component.out()), object, "component");
       check(NMR::lib3mf_component_getobjectresource(component.get(), child.out()), component.get(),
             "component object");
-      BOOL hasTransform = false;
-      check(NMR::lib3mf_component_hastransform(component.get(), &hasTransform), component.get(), "component");
-      Affine local = identity();
-      if (hasTransform) {
-        NMR::MODELTRANSFORM t;
-        check(NMR::lib3mf_component_gettransform(component.get(), &t), component.get(),
-              "component transform");
-        local = fromLib3mf(t);
-      }
+      const Affine local = transformOf(component.get(), NMR::lib3mf_component_hastransform,
+                                       NMR::lib3mf_component_gettransform, "component transform");
       addObject(child.get(), compose(placement, local), depth + 1);
     }
   }
