@@ -268,6 +268,10 @@ TEST(MeshReader, ObjErrorsNameTheFaceOrVertex) {
             "a.obj: face 6: corner 2 has vertex index 0 or no number");
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("v 0 0 0\nv 1 0 0\nv 0 1e99 0\nf 1 2 3\n"), "a.obj"); }),
             "a.obj: vertex 3: non-finite coordinate (NaN, infinity or beyond float's range)");
+  EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("v 0 0 0\n  v 1 nan 0\nv 0 1 0\nf 1 2 3\n"), "a.obj"); }),
+            "a.obj: vertex 2 (line 2): coordinate 'nan' is not a finite number");
+  EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("v 0 0 0\nv 1 0 0\nv 0 1,5 0\nf 1 2 3\n"), "a.obj"); }),
+            "a.obj: vertex 3 (line 3): coordinate '1,5' is not a finite number");
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("# nothing\nv 0 0 0\nvn 0 0 1\n"), "a.obj"); }),
             "a.obj: contains no facets");
   // A face may name vertices defined after it.

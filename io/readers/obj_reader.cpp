@@ -2,6 +2,8 @@
 
 #include <tiny_obj_loader.h>
 
+#include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <istream>
 #include <limits>
@@ -45,6 +47,39 @@ struct ObjState {
   // at the end: (face, largest index).
   std::vector<std::pair<uint64_t, uint32_t>> forward;
 };
+
+// tinyobjloader reads a coordinate it cannot parse ("nan", "inf", "abc", "1,5") as 0 or a prefix without a
+// word, so the values of every v line are checked here first: each of the first three present must be a
+// finite number as std::from_chars reads it (with an optional leading '+').
+void checkVertexLines(std::string_view text, const std::string& name) {
+  const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
+  uint64_t vertex = 0, line = 0;
+  for (std::size_t pos = 0; pos < text.size();) {
+    const std::size_t lf = std::min(text.find('\n', pos), text.size());
+    std::string_view rest = text.substr(pos, lf - pos);
+    pos = lf + 1;
+    ++line;
+    while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
+    if (rest.size() < 2 || rest[0] != 'v' || !blank(rest[1])) continue;
+    ++vertex;
+    rest.remove_prefix(2);
+    for (int k = 0; k < 3; ++k) {
+      while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
+      if (rest.empty()) break;
+      std::size_t end = 0;
+      while (end < rest.size() && !blank(rest[end])) ++end;
+      const std::string_view token = rest.substr(0, end);
+      rest.remove_prefix(end);
+      const char* begin = token.data() + (token.size() > 1 && token[0] == '+' && token[1] != '-');
+      double value = 0;
+      const auto [ptr, ec] = std::from_chars(begin, token.data() + token.size(), value);
+      if (ec != std::errc() || ptr != token.data() + token.size() || !std::isfinite(value)) {
+        throwInputError(name, "vertex " + std::to_string(vertex) + " (line " + std::to_string(line) +
+                                  "): coordinate " + quoteToken(token) + " is not a finite number");
+      }
+    }
+  }
+}
 
 void onVertex(void* user, tinyobj::real_t x, tinyobj::real_t y, tinyobj::real_t z, tinyobj::real_t) {
   auto& s = *static_cast<ObjState*>(user);
@@ -92,7 +127,9 @@ FacetSoup parseObj(std::span<const std::byte> bytes, const std::string& name, Ob
   ObjSource& out = source ? *source : local;
   out = ObjSource{};
 
-  SpanStreamBuf buffer(std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  checkVertexLines(text, name);
+  SpanStreamBuf buffer(text);
   std::istream stream(&buffer);
   ObjState state;
   state.name = &name;

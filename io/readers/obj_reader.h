@@ -6,8 +6,9 @@
 // - The bytes are not compressed (io/readers/mesh_reader.h inflates gzip first); they are read from
 //   memory. Materials are never loaded: mtllib names no file that is opened, usemtl is ignored.
 // - "v x y z [w]": the position; w and any trailing colour values are ignored. A missing y or z reads
-//   as 0 (tinyobjloader's rule). NaN, infinity or a value beyond float's range -> "vertex V: ..." (V
-//   counted from 1, as f lines count them).
+//   as 0 (tinyobjloader's rule). Each value present must be a finite number (checked by this reader:
+//   tinyobjloader would read "nan" or "abc" as 0) -> "vertex V (line L): coordinate 'nan' is not a
+//   finite number"; beyond float's range -> "vertex V: ..." (V counted from 1, as f lines count them).
 // - "f" with corners "v", "v/vt", "v//vn" or "v/vt/vn": only v is used. Positive indices count from 1,
 //   negative ones back from the last vertex defined before the face (-1 is the latest). A face of n >= 3
 //   corners becomes n - 2 facets fanned from its first corner, (0, i, i+1), keeping the file's
