@@ -675,7 +675,7 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
   constexpr std::size_t kLayers = 10;
   ASSERT_EQ(cli.layers.size(), kLayers);
   ASSERT_EQ(rows.size(), kLayers + 1);  // the header and one row per layer
-  std::vector<Point2d> section;  // the cylinder's cross-section, counter-clockwise
+  std::vector<Point2d> section;         // the cylinder's cross-section, counter-clockwise
   for (int i = 0; i < 32; ++i) {
     const double a = 2 * std::numbers::pi * i / 32;
     section.push_back({static_cast<float>(19 + 2 * std::cos(a)), static_cast<float>(5 + 2 * std::sin(a))});

@@ -210,7 +210,8 @@ TEST_F(OutputSafety, BatchOutputThatIsAnInputIsRefused) {
   writeBytes(path("v.stl"), model);
   fs::create_symlink("v.stl", path("v.cli"));
   writeBytes(path("job.json"),
-             "{\"template\": {\"model\": \"v.stl\"}, \"settings\": {\"overwrite\": true, \"layer_height\": 0.5}, \"variants\": "
+             "{\"template\": {\"model\": \"v.stl\"}, \"settings\": {\"overwrite\": true, \"layer_height\": "
+             "0.5}, \"variants\": "
              "[{\"name\": \"a\", \"model\": \"v.stl\", \"contours\": \"v.cli\"}]}");
   const RunResult r = run({"batch", "job.json", "-q"});
   EXPECT_EQ(r.code(), 1) << r.describe();

@@ -23,6 +23,7 @@
 #include "core/contours.h"
 #include "io/contours/threemf_writer.h"
 #include "io/errors.h"
+#include "io/readers/lib3mf_handle.h"
 #include "io/readers/stl_writer.h"
 #include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"
@@ -164,22 +165,6 @@ extern "C" const char* __lsan_default_suppressions() {
 namespace toposlice {
 namespace {
 
-// Owns one lib3mf object handle.
-class Lib3mfObject {
- public:
-  Lib3mfObject() = default;
-  Lib3mfObject(const Lib3mfObject&) = delete;
-  Lib3mfObject& operator=(const Lib3mfObject&) = delete;
-  ~Lib3mfObject() {
-    if (p_ != nullptr) NMR::lib3mf_release(p_);
-  }
-  NMR::PLib3MFBase* get() const { return p_; }
-  NMR::PLib3MFBase** out() { return &p_; }
-
- private:
-  NMR::PLib3MFBase* p_ = nullptr;
-};
-
 struct ReadSlice {
   float ztop = 0;
   std::vector<NMR::MODELSLICEVERTEX> vertices;
@@ -224,7 +209,7 @@ struct ReadModel {
 
 ReadModel readWithLib3mf(const fs::path& path) {
   ReadModel result;
-  Lib3mfObject model, reader;
+  Lib3mfHandle model, reader;
   LIB3MF_CHECK(NMR::lib3mf_createmodel(model.out()));
   LIB3MF_CHECK(NMR::lib3mf_model_queryreader(model.get(), "3mf", reader.out()));
   if (NMR::lib3mf_reader_readfromfileutf8(reader.get(), path.c_str()) != LIB3MF_OK) {
@@ -245,12 +230,12 @@ ReadModel readWithLib3mf(const fs::path& path) {
     result.warningCodes.push_back(code);
   }
 
-  Lib3mfObject meshes;
+  Lib3mfHandle meshes;
   LIB3MF_CHECK(NMR::lib3mf_model_getmeshobjects(model.get(), meshes.out()));
   BOOL hasNext = false;
   LIB3MF_CHECK(NMR::lib3mf_resourceiterator_movenext(meshes.get(), &hasNext));
   while (hasNext) {
-    Lib3mfObject mesh;
+    Lib3mfHandle mesh;
     LIB3MF_CHECK(NMR::lib3mf_resourceiterator_getcurrent(meshes.get(), mesh.out()));
     ++result.meshObjects;
     ReadObject& o = result.objects.emplace_back();
@@ -271,12 +256,12 @@ ReadModel readWithLib3mf(const fs::path& path) {
     if (nt > 0)
       LIB3MF_CHECK(NMR::lib3mf_meshobject_gettriangleindices(mesh.get(), o.triangles.data(), nt, nullptr));
     if (o.sliceStackId != 0) {
-      Lib3mfObject stack;
+      Lib3mfHandle stack;
       LIB3MF_CHECK(NMR::lib3mf_model_getslicestackById(model.get(), o.sliceStackId, stack.out()));
       DWORD count = 0;
       LIB3MF_CHECK(NMR::lib3mf_slicestack_getslicecount(stack.get(), &count));
       for (DWORD i = 0; i < count; ++i) {
-        Lib3mfObject slice;
+        Lib3mfHandle slice;
         LIB3MF_CHECK(NMR::lib3mf_slicestack_getslice(stack.get(), i, slice.out()));
         ReadSlice& rs = o.slices.emplace_back();
         LIB3MF_CHECK(NMR::lib3mf_slice_gettopz(slice.get(), &rs.ztop));
@@ -307,11 +292,11 @@ ReadModel readWithLib3mf(const fs::path& path) {
     result.slices = first.slices;
   }
 
-  Lib3mfObject items;
+  Lib3mfHandle items;
   LIB3MF_CHECK(NMR::lib3mf_model_getbuilditems(model.get(), items.out()));
   LIB3MF_CHECK(NMR::lib3mf_builditemiterator_movenext(items.get(), &hasNext));
   while (hasNext) {
-    Lib3mfObject item;
+    Lib3mfHandle item;
     LIB3MF_CHECK(NMR::lib3mf_builditemiterator_getcurrent(items.get(), item.out()));
     DWORD id = 0;
     LIB3MF_CHECK(NMR::lib3mf_builditem_getobjectresourceid(item.get(), &id));

@@ -1,16 +1,8 @@
 #include "io/readers/stl_reader.h"
 
-#include <fcntl.h>
-#include <libdeflate.h>
-#include <sys/stat.h>
-#include <unistd.h>
-#include <zlib.h>
-
 #include <algorithm>
 #include <bit>
-#include <cerrno>
 #include <charconv>
-#include <climits>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -19,7 +11,7 @@
 #include <string_view>
 #include <system_error>
 
-#include "io/errors.h"
+#include "io/readers/byte_input.h"
 
 namespace toposlice {
 namespace {
@@ -31,23 +23,8 @@ constexpr std::size_t kBinaryPrefixBytes = 84;  // header + uint32 facet count
 constexpr std::size_t kBinaryFacetBytes = 50;   // normal, 3 corners (12 floats), uint16 attribute
 
 [[noreturn]] void fail(const std::string& name, const std::string& what) {
-  throw InputError(name + ": " + what);
+  throwInputError(name, what);
 }
-
-// A byte buffer that is not zero-filled on allocation (it is always overwritten).
-struct ByteBuffer {
-  std::unique_ptr<std::byte[]> data;
-  std::size_t size = 0;
-  std::size_t capacity = 0;
-
-  void reserveExactly(std::size_t newCapacity) {
-    auto grown = std::make_unique_for_overwrite<std::byte[]>(newCapacity);
-    if (size > 0) std::memcpy(grown.get(), data.get(), size);
-    data = std::move(grown);
-    capacity = newCapacity;
-  }
-  std::span<const std::byte> view() const { return {data.get(), size}; }
-};
 
 inline uint32_t loadLe32(const std::byte* p) {
   uint32_t v;
@@ -60,139 +37,6 @@ inline uint32_t loadLe32(const std::byte* p) {
 
 inline bool isSpace(char c) {
   return c == ' ' || (c >= '\t' && c <= '\r');
-}
-
-// ---------------------------------------------------------------------------------------------------
-// File and gzip layers.
-
-ByteBuffer readWholeFile(const std::filesystem::path& path) {
-  const std::string name = path.string();
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) fail(name, "cannot open: " + std::generic_category().message(errno));
-  struct Closer {
-    int fd;
-    ~Closer() { ::close(fd); }
-  } closer{fd};
-  struct stat info {};
-  if (::fstat(fd, &info) != 0) fail(name, "cannot stat: " + std::generic_category().message(errno));
-  if (S_ISDIR(info.st_mode)) fail(name, "is a directory");
-
-  ByteBuffer buffer;
-  // One byte more than a regular file's size, so the read that sees the end needs no growth.
-  const std::size_t expected = S_ISREG(info.st_mode) ? static_cast<std::size_t>(info.st_size) : 0;
-  buffer.reserveExactly(std::max<std::size_t>(expected + 1, 4096));
-  for (;;) {
-    if (buffer.size == buffer.capacity) buffer.reserveExactly(buffer.capacity * 2);
-    const ssize_t got = ::read(fd, buffer.data.get() + buffer.size, buffer.capacity - buffer.size);
-    if (got < 0) {
-      if (errno == EINTR) continue;
-      fail(name, "read error: " + std::generic_category().message(errno));
-    }
-    if (got == 0) break;
-    buffer.size += static_cast<std::size_t>(got);
-  }
-  return buffer;
-}
-
-bool isGzip(std::span<const std::byte> bytes) {
-  return bytes.size() >= 2 && bytes[0] == std::byte{0x1F} && bytes[1] == std::byte{0x8B};
-}
-
-// The last member's ISIZE trailer (the uncompressed size mod 2^32), capped by deflate's maximum ratio so
-// that a forged trailer cannot force a huge allocation. A hint only.
-std::size_t gzipSizeHint(std::span<const std::byte> in) {
-  if (in.size() < 18) return 0;
-  const std::size_t maxBytes = in.size() <= SIZE_MAX / 1100 ? in.size() * 1100 : SIZE_MAX / 2;
-  return std::min<std::size_t>(loadLe32(in.data() + in.size() - 4), maxBytes);
-}
-
-// Inflates one or more concatenated gzip members, on demand, into caller-owned memory.
-class GzipReader {
- public:
-  GzipReader(std::span<const std::byte> in, const std::string& name) : in_(in), name_(name) {
-    if (inflateInit2(&stream_, 16 + MAX_WBITS) != Z_OK) fail(name_, "cannot initialise zlib");
-  }
-  ~GzipReader() { inflateEnd(&stream_); }
-  GzipReader(const GzipReader&) = delete;
-  GzipReader& operator=(const GzipReader&) = delete;
-
-  std::size_t sizeHint() const { return gzipSizeHint(in_); }
-
-  // Fills out[0, size); returns fewer bytes only at the end of the stream.
-  std::size_t read(std::byte* out, std::size_t size) {
-    std::size_t done = 0;
-    while (done < size && !finished_) {
-      if (stream_.avail_in == 0 && fed_ < in_.size()) {
-        const std::size_t chunk = std::min<std::size_t>(in_.size() - fed_, UINT_MAX);
-        // zlib's API is not const-correct; it never writes through next_in.
-        stream_.next_in = const_cast<Bytef*>(reinterpret_cast<const Bytef*>(in_.data() + fed_));
-        stream_.avail_in = static_cast<uInt>(chunk);
-        fed_ += chunk;
-      }
-      const auto room = static_cast<uInt>(std::min<std::size_t>(size - done, UINT_MAX));
-      stream_.next_out = reinterpret_cast<Bytef*>(out + done);
-      stream_.avail_out = room;
-      const int rc = inflate(&stream_, Z_NO_FLUSH);
-      done += room - stream_.avail_out;
-      if (rc == Z_STREAM_END) {
-        const std::size_t rest = stream_.avail_in + (in_.size() - fed_);
-        if (rest == 0) {
-          finished_ = true;
-        } else if (isGzip(in_.subspan(in_.size() - rest))) {
-          inflateReset(&stream_);  // the next member of a multi-member file
-        } else {
-          fail(name_, "corrupt gzip stream: " + std::to_string(rest) + " unexpected bytes after its end");
-        }
-      } else if (rc == Z_BUF_ERROR) {
-        // No progress with room to write: the input ran out before the end of the stream.
-        if (stream_.avail_in == 0 && fed_ == in_.size()) fail(name_, "truncated gzip stream");
-      } else if (rc == Z_MEM_ERROR) {
-        fail(name_, "out of memory while decompressing gzip");
-      } else if (rc != Z_OK) {
-        fail(name_, std::string("corrupt gzip stream: ") + (stream_.msg ? stream_.msg : "invalid data"));
-      }
-    }
-    return done;
-  }
-
-  // The whole (remaining) stream, in one buffer sized from the trailer.
-  ByteBuffer readAll() {
-    ByteBuffer out;
-    out.reserveExactly(std::max<std::size_t>(sizeHint() + 1, 4096));
-    for (;;) {
-      const std::size_t room = out.capacity - out.size;
-      const std::size_t got = read(out.data.get() + out.size, room);
-      out.size += got;
-      if (got < room) return out;
-      out.reserveExactly(out.capacity * 2);
-    }
-  }
-
- private:
-  z_stream stream_{};
-  std::span<const std::byte> in_;
-  const std::string& name_;
-  std::size_t fed_ = 0;  // bytes of in_ handed to zlib so far
-  bool finished_ = false;
-};
-
-// The whole stream in one call of libdeflate (about twice zlib's speed), for the common case of one
-// gzip member whose trailer gives the exact size. Returns false for anything else -- several members, a
-// size over 4 GiB, any damage -- and the caller then reads it with GzipReader, which names the problem.
-bool inflateWhole(std::span<const std::byte> in, std::size_t sizeHint, ByteBuffer& out) {
-  if (sizeHint == 0) return false;
-  struct Freer {
-    void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
-  };
-  const std::unique_ptr<libdeflate_decompressor, Freer> decompressor(libdeflate_alloc_decompressor());
-  if (!decompressor) return false;
-  out.reserveExactly(sizeHint + 1);
-  std::size_t inUsed = 0, outSize = 0;
-  const libdeflate_result rc = libdeflate_gzip_decompress_ex(decompressor.get(), in.data(), in.size(),
-                                                             out.data.get(), sizeHint, &inUsed, &outSize);
-  if (rc != LIBDEFLATE_SUCCESS || inUsed != in.size() || outSize != sizeHint) return false;
-  out.size = outSize;
-  return true;
 }
 
 // ---------------------------------------------------------------------------------------------------
@@ -375,18 +219,6 @@ NumberRead readFloat(std::string_view token, float& value) {
   return NumberRead::kOk;
 }
 
-// A token quoted for an error message: at most 32 characters, non-printable bytes as '?'.
-std::string quoted(std::string_view token) {
-  if (token.empty()) return "end of file";
-  std::string text = "'";
-  for (std::size_t i = 0; i < token.size() && i < 32; ++i) {
-    const char c = token[i];
-    text += c >= ' ' && c <= '~' ? c : '?';
-  }
-  if (token.size() > 32) text += "...";
-  return text + "'";
-}
-
 class AsciiParser {
  public:
   AsciiParser(std::string_view text, const std::string& name)
@@ -398,7 +230,7 @@ class AsciiParser {
     bool first = true;
     while (true) {
       if (!lexer_.consumePrefix("solid")) {
-        failAtLine("expected 'solid', found " + quoted(lexer_.next()));
+        failAtLine("expected 'solid', found " + quoteToken(lexer_.next()));
       }
       const std::string_view solidName = lexer_.restOfLine();
       if (first) source.solidName.assign(solidName);
@@ -417,7 +249,7 @@ class AsciiParser {
       if (token.empty()) return false;
       if (isKeyword(token, "endsolid")) return true;
       if (!isKeyword(token, "facet")) {
-        failInFacet("expected 'facet' or 'endsolid', found " + quoted(token));
+        failInFacet("expected 'facet' or 'endsolid', found " + quoteToken(token));
       }
       parseFacet(soup);
     }
@@ -431,7 +263,7 @@ class AsciiParser {
       const std::string_view token = lexer_.next();
       float ignored;
       if (readFloat(token, ignored) == NumberRead::kNotANumber) {
-        failInFacet("'facet normal' needs 3 numbers, found " + quoted(token));
+        failInFacet("'facet normal' needs 3 numbers, found " + quoteToken(token));
       }
     }
     expectKeyword("outer");
@@ -441,7 +273,8 @@ class AsciiParser {
     for (;;) {
       const std::string_view token = lexer_.next();
       if (isKeyword(token, "endloop")) break;
-      if (!isKeyword(token, "vertex")) failInFacet("expected 'vertex' or 'endloop', found " + quoted(token));
+      if (!isKeyword(token, "vertex"))
+        failInFacet("expected 'vertex' or 'endloop', found " + quoteToken(token));
       Point3f p;
       p.x = readCoordinate();
       p.y = readCoordinate();
@@ -465,20 +298,20 @@ class AsciiParser {
     float value = 0;
     switch (readFloat(token, value)) {
       case NumberRead::kOk:
-        if (!std::isfinite(value)) failInFacet("non-finite coordinate " + quoted(token));
+        if (!std::isfinite(value)) failInFacet("non-finite coordinate " + quoteToken(token));
         return value;
       case NumberRead::kOutOfRange:
-        failInFacet("coordinate out of float range " + quoted(token));
+        failInFacet("coordinate out of float range " + quoteToken(token));
       case NumberRead::kNotANumber:
         break;
     }
-    failInFacet("expected a coordinate, found " + quoted(token));
+    failInFacet("expected a coordinate, found " + quoteToken(token));
   }
 
   void expectKeyword(std::string_view lower) {
     const std::string_view token = lexer_.next();
     if (!isKeyword(token, lower)) {
-      failInFacet("expected '" + std::string(lower) + "', found " + quoted(token));
+      failInFacet("expected '" + std::string(lower) + "', found " + quoteToken(token));
     }
   }
 
@@ -563,6 +396,13 @@ FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, St
     const ByteBuffer inflated = GzipReader(bytes, name).readAll();
     return parseUncompressed(inflated.view(), name, out);
   }
+  return parseUncompressed(bytes, name, out);
+}
+
+FacetSoup parseStlUncompressed(std::span<const std::byte> bytes, const std::string& name, StlSource* source) {
+  StlSource local;
+  StlSource& out = source ? *source : local;
+  out = StlSource{};
   return parseUncompressed(bytes, name, out);
 }
 

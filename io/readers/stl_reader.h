@@ -75,4 +75,9 @@ FacetSoup readStl(const std::filesystem::path& path, StlSource* source = nullptr
 // Same, from bytes already in memory (used by fuzzers); `name` starts every error message.
 FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, StlSource* source = nullptr);
 
+// Same, for bytes already inflated (the mesh reader, io/readers/mesh_reader.h): no gzip detection, and
+// StlSource::gzip stays false.
+FacetSoup parseStlUncompressed(std::span<const std::byte> bytes, const std::string& name,
+                               StlSource* source = nullptr);
+
 }  // namespace toposlice

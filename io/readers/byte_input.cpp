@@ -1,0 +1,164 @@
+#include "io/readers/byte_input.h"
+
+#include <fcntl.h>
+#include <libdeflate.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <climits>
+#include <cstdint>
+#include <cstring>
+#include <system_error>
+
+#include "io/errors.h"
+
+namespace toposlice {
+
+void throwInputError(const std::string& name, const std::string& what) {
+  throw InputError(name + ": " + what);
+}
+
+std::string quoteToken(std::string_view token) {
+  if (token.empty()) return "end of file";
+  std::string text = "'";
+  for (std::size_t i = 0; i < token.size() && i < 32; ++i) {
+    const char c = token[i];
+    text += c >= ' ' && c <= '~' ? c : '?';
+  }
+  if (token.size() > 32) text += "...";
+  return text + "'";
+}
+
+void ByteBuffer::reserveExactly(std::size_t newCapacity) {
+  auto grown = std::make_unique_for_overwrite<std::byte[]>(newCapacity);
+  if (size > 0) std::memcpy(grown.get(), data.get(), size);
+  data = std::move(grown);
+  capacity = newCapacity;
+}
+
+ByteBuffer readWholeFile(const std::filesystem::path& path) {
+  const std::string name = path.string();
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throwInputError(name, "cannot open: " + std::generic_category().message(errno));
+  struct Closer {
+    int fd;
+    ~Closer() { ::close(fd); }
+  } closer{fd};
+  struct stat info {};
+  if (::fstat(fd, &info) != 0)
+    throwInputError(name, "cannot stat: " + std::generic_category().message(errno));
+  if (S_ISDIR(info.st_mode)) throwInputError(name, "is a directory");
+
+  ByteBuffer buffer;
+  // One byte more than a regular file's size, so the read that sees the end needs no growth.
+  const std::size_t expected = S_ISREG(info.st_mode) ? static_cast<std::size_t>(info.st_size) : 0;
+  buffer.reserveExactly(std::max<std::size_t>(expected + 1, 4096));
+  for (;;) {
+    if (buffer.size == buffer.capacity) buffer.reserveExactly(buffer.capacity * 2);
+    const ssize_t got = ::read(fd, buffer.data.get() + buffer.size, buffer.capacity - buffer.size);
+    if (got < 0) {
+      if (errno == EINTR) continue;
+      throwInputError(name, "read error: " + std::generic_category().message(errno));
+    }
+    if (got == 0) break;
+    buffer.size += static_cast<std::size_t>(got);
+  }
+  return buffer;
+}
+
+bool isGzip(std::span<const std::byte> bytes) {
+  return bytes.size() >= 2 && bytes[0] == std::byte{0x1F} && bytes[1] == std::byte{0x8B};
+}
+
+std::size_t gzipSizeHint(std::span<const std::byte> in) {
+  if (in.size() < 18) return 0;
+  const std::byte* p = in.data() + in.size() - 4;
+  uint32_t trailer = 0;
+  for (int i = 3; i >= 0; --i) trailer = (trailer << 8) | std::to_integer<uint32_t>(p[i]);
+  const std::size_t maxBytes = in.size() <= SIZE_MAX / 1100 ? in.size() * 1100 : SIZE_MAX / 2;
+  return std::min<std::size_t>(trailer, maxBytes);
+}
+
+GzipReader::GzipReader(std::span<const std::byte> in, const std::string& name) : in_(in), name_(name) {
+  if (inflateInit2(&stream_, 16 + MAX_WBITS) != Z_OK) throwInputError(name_, "cannot initialise zlib");
+}
+
+GzipReader::~GzipReader() {
+  inflateEnd(&stream_);
+}
+
+std::size_t GzipReader::read(std::byte* out, std::size_t size) {
+  std::size_t done = 0;
+  while (done < size && !finished_) {
+    if (stream_.avail_in == 0 && fed_ < in_.size()) {
+      const std::size_t chunk = std::min<std::size_t>(in_.size() - fed_, UINT_MAX);
+      // zlib's API is not const-correct; it never writes through next_in.
+      stream_.next_in = const_cast<Bytef*>(reinterpret_cast<const Bytef*>(in_.data() + fed_));
+      stream_.avail_in = static_cast<uInt>(chunk);
+      fed_ += chunk;
+    }
+    const auto room = static_cast<uInt>(std::min<std::size_t>(size - done, UINT_MAX));
+    stream_.next_out = reinterpret_cast<Bytef*>(out + done);
+    stream_.avail_out = room;
+    const int rc = inflate(&stream_, Z_NO_FLUSH);
+    done += room - stream_.avail_out;
+    if (rc == Z_STREAM_END) {
+      const std::size_t rest = stream_.avail_in + (in_.size() - fed_);
+      if (rest == 0) {
+        finished_ = true;
+      } else if (isGzip(in_.subspan(in_.size() - rest))) {
+        inflateReset(&stream_);  // the next member of a multi-member file
+      } else {
+        throwInputError(name_,
+                        "corrupt gzip stream: " + std::to_string(rest) + " unexpected bytes after its end");
+      }
+    } else if (rc == Z_BUF_ERROR) {
+      // No progress with room to write: the input ran out before the end of the stream.
+      if (stream_.avail_in == 0 && fed_ == in_.size()) throwInputError(name_, "truncated gzip stream");
+    } else if (rc == Z_MEM_ERROR) {
+      throwInputError(name_, "out of memory while decompressing gzip");
+    } else if (rc != Z_OK) {
+      throwInputError(name_,
+                      std::string("corrupt gzip stream: ") + (stream_.msg ? stream_.msg : "invalid data"));
+    }
+  }
+  return done;
+}
+
+ByteBuffer GzipReader::readAll() {
+  ByteBuffer out;
+  out.reserveExactly(std::max<std::size_t>(sizeHint() + 1, 4096));
+  for (;;) {
+    const std::size_t room = out.capacity - out.size;
+    const std::size_t got = read(out.data.get() + out.size, room);
+    out.size += got;
+    if (got < room) return out;
+    out.reserveExactly(out.capacity * 2);
+  }
+}
+
+bool inflateWhole(std::span<const std::byte> in, std::size_t sizeHint, ByteBuffer& out) {
+  if (sizeHint == 0) return false;
+  struct Freer {
+    void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
+  };
+  const std::unique_ptr<libdeflate_decompressor, Freer> decompressor(libdeflate_alloc_decompressor());
+  if (!decompressor) return false;
+  out.reserveExactly(sizeHint + 1);
+  std::size_t inUsed = 0, outSize = 0;
+  const libdeflate_result rc = libdeflate_gzip_decompress_ex(decompressor.get(), in.data(), in.size(),
+                                                             out.data.get(), sizeHint, &inUsed, &outSize);
+  if (rc != LIBDEFLATE_SUCCESS || inUsed != in.size() || outSize != sizeHint) return false;
+  out.size = outSize;
+  return true;
+}
+
+ByteBuffer gunzip(std::span<const std::byte> in, const std::string& name) {
+  ByteBuffer whole;
+  if (inflateWhole(in, gzipSizeHint(in), whole)) return whole;
+  return GzipReader(in, name).readAll();
+}
+
+}  // namespace toposlice

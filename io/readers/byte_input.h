@@ -1,0 +1,78 @@
+// Bytes in, for every mesh reader (io/readers/): a whole file in memory, gzip streams inflated.
+//
+// - readWholeFile reads a file in one buffer ("<path>: cannot open: ...", "is a directory", "read error").
+// - A gzip stream is recognised by its magic 1f 8b, never by the file name. Several concatenated members
+//   are one stream. A corrupt, truncated or trailing-garbage stream is an InputError ("corrupt gzip
+//   stream ...", "truncated gzip stream").
+// - Sizes taken from a gzip trailer are hints only, capped by deflate's maximum ratio, so a forged
+//   trailer cannot force a huge allocation.
+#pragma once
+
+#include <zlib.h>
+
+#include <cstddef>
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+
+namespace toposlice {
+
+// Throws InputError("<name>: <what>").
+[[noreturn]] void throwInputError(const std::string& name, const std::string& what);
+
+// A token quoted for an error message: at most 32 characters, non-printable bytes as '?'; an empty
+// token is "end of file".
+std::string quoteToken(std::string_view token);
+
+// A byte buffer that is not zero-filled on allocation (it is always overwritten).
+struct ByteBuffer {
+  std::unique_ptr<std::byte[]> data;
+  std::size_t size = 0;
+  std::size_t capacity = 0;
+
+  void reserveExactly(std::size_t newCapacity);
+  std::span<const std::byte> view() const { return {data.get(), size}; }
+};
+
+ByteBuffer readWholeFile(const std::filesystem::path& path);
+
+bool isGzip(std::span<const std::byte> bytes);
+
+// The last member's ISIZE trailer (the uncompressed size mod 2^32), capped; 0 when too short. A hint only.
+std::size_t gzipSizeHint(std::span<const std::byte> in);
+
+// Inflates one or more concatenated gzip members, on demand, into caller-owned memory.
+class GzipReader {
+ public:
+  GzipReader(std::span<const std::byte> in, const std::string& name);
+  ~GzipReader();
+  GzipReader(const GzipReader&) = delete;
+  GzipReader& operator=(const GzipReader&) = delete;
+
+  std::size_t sizeHint() const { return gzipSizeHint(in_); }
+
+  // Fills out[0, size); returns fewer bytes only at the end of the stream.
+  std::size_t read(std::byte* out, std::size_t size);
+
+  // The whole (remaining) stream, in one buffer sized from the trailer.
+  ByteBuffer readAll();
+
+ private:
+  z_stream stream_{};
+  std::span<const std::byte> in_;
+  const std::string& name_;
+  std::size_t fed_ = 0;  // bytes of in_ handed to zlib so far
+  bool finished_ = false;
+};
+
+// The whole stream in one call of libdeflate (about twice zlib's speed), for the common case of one gzip
+// member whose trailer gives the exact size. Returns false for anything else -- several members, a size
+// over 4 GiB, any damage -- and the caller then reads it with GzipReader, which names the problem.
+bool inflateWhole(std::span<const std::byte> in, std::size_t sizeHint, ByteBuffer& out);
+
+// The whole gzip stream `in` inflated: inflateWhole, else GzipReader::readAll (which names any damage).
+ByteBuffer gunzip(std::span<const std::byte> in, const std::string& name);
+
+}  // namespace toposlice

@@ -1,0 +1,161 @@
+#include "io/readers/obj_reader.h"
+
+#include <tiny_obj_loader.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <istream>
+#include <limits>
+#include <map>
+#include <streambuf>
+#include <string_view>
+#include <vector>
+
+#include "io/readers/byte_input.h"
+
+namespace toposlice {
+namespace {
+
+// Reads the bytes in place, without a copy. The get area is only read: a stream buffer writes into it
+// only from pbackfail/sputbackc with a different character, which the default pbackfail refuses.
+class SpanStreamBuf : public std::streambuf {
+ public:
+  explicit SpanStreamBuf(std::string_view text) {
+    char* begin = const_cast<char*>(text.data());
+    setg(begin, begin, begin + text.size());
+  }
+};
+
+// Materials are never loaded: no .mtl file is opened, whatever the OBJ's mtllib says.
+class NoMaterials : public tinyobj::MaterialReader {
+ public:
+  bool operator()(const std::string&, std::vector<tinyobj::material_t>*, std::map<std::string, int>*,
+                  std::string*, std::string*) override {
+    return true;
+  }
+};
+
+struct ObjState {
+  const std::string* name = nullptr;
+  std::vector<Point3f> vertices;
+  std::vector<uint32_t> triangles;  // 3 vertex indices per facet
+  std::vector<uint32_t> corners;    // scratch: the current face
+  uint64_t faces = 0;               // f lines so far
+  uint64_t polygons = 0;            // faces with more than 3 corners
+  // Faces with a positive index beyond the vertices defined so far (legal if defined later), checked
+  // at the end: (face, largest index).
+  std::vector<std::pair<uint64_t, uint32_t>> forward;
+};
+
+// tinyobjloader reads a coordinate it cannot parse ("nan", "inf", "abc", "1,5") as 0 or a prefix without a
+// word, so the values of every v line are checked here first: each of the first three present must be a
+// finite number as std::from_chars reads it (with an optional leading '+').
+void checkVertexLines(std::string_view text, const std::string& name) {
+  const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
+  uint64_t vertex = 0, line = 0;
+  for (std::size_t pos = 0; pos < text.size();) {
+    const std::size_t lf = std::min(text.find('\n', pos), text.size());
+    std::string_view rest = text.substr(pos, lf - pos);
+    pos = lf + 1;
+    ++line;
+    while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
+    if (rest.size() < 2 || rest[0] != 'v' || !blank(rest[1])) continue;
+    ++vertex;
+    rest.remove_prefix(2);
+    for (int k = 0; k < 3; ++k) {
+      while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
+      if (rest.empty()) break;
+      std::size_t end = 0;
+      while (end < rest.size() && !blank(rest[end])) ++end;
+      const std::string_view token = rest.substr(0, end);
+      rest.remove_prefix(end);
+      const char* begin = token.data() + (token.size() > 1 && token[0] == '+' && token[1] != '-');
+      double value = 0;
+      const auto [ptr, ec] = std::from_chars(begin, token.data() + token.size(), value);
+      if (ec != std::errc() || ptr != token.data() + token.size() || !std::isfinite(value)) {
+        throwInputError(name, "vertex " + std::to_string(vertex) + " (line " + std::to_string(line) +
+                                  "): coordinate " + quoteToken(token) + " is not a finite number");
+      }
+    }
+  }
+}
+
+void onVertex(void* user, tinyobj::real_t x, tinyobj::real_t y, tinyobj::real_t z, tinyobj::real_t) {
+  auto& s = *static_cast<ObjState*>(user);
+  if (!std::isfinite(x) || !std::isfinite(y) || !std::isfinite(z)) {
+    throwInputError(*s.name, "vertex " + std::to_string(s.vertices.size() + 1) +
+                                 ": non-finite coordinate (NaN, infinity or beyond float's range)");
+  }
+  s.vertices.push_back({x, y, z});
+}
+
+void onFace(void* user, tinyobj::index_t* indices, int count) {
+  auto& s = *static_cast<ObjState*>(user);
+  const uint64_t face = s.faces++;
+  const auto fail = [&](const std::string& what) {
+    throwInputError(*s.name, "face " + std::to_string(face) + ": " + what);
+  };
+  if (count < 3) fail(std::to_string(count) + " corners, expected at least 3");
+  s.corners.clear();
+  uint32_t largest = 0;
+  const int64_t defined = static_cast<int64_t>(s.vertices.size());
+  for (int k = 0; k < count; ++k) {
+    const int64_t raw = indices[k].vertex_index;
+    if (raw == 0) fail("corner " + std::to_string(k) + " has vertex index 0 or no number");
+    const int64_t index = raw > 0 ? raw - 1 : defined + raw;
+    if (index < 0 || index > int64_t{UINT32_MAX} - 1) {
+      fail("vertex index " + std::to_string(raw) + " out of range (" + std::to_string(defined) +
+           " vertices before it)");
+    }
+    s.corners.push_back(static_cast<uint32_t>(index));
+    largest = std::max(largest, static_cast<uint32_t>(index));
+  }
+  if (largest >= s.vertices.size()) s.forward.emplace_back(face, largest);
+  for (std::size_t i = 1; i + 1 < s.corners.size(); ++i) {
+    s.triangles.push_back(s.corners[0]);
+    s.triangles.push_back(s.corners[i]);
+    s.triangles.push_back(s.corners[i + 1]);
+  }
+  s.polygons += count > 3;
+}
+
+}  // namespace
+
+FacetSoup parseObj(std::span<const std::byte> bytes, const std::string& name, ObjSource* source) {
+  ObjSource local;
+  ObjSource& out = source ? *source : local;
+  out = ObjSource{};
+
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  checkVertexLines(text, name);
+  SpanStreamBuf buffer(text);
+  std::istream stream(&buffer);
+  ObjState state;
+  state.name = &name;
+  tinyobj::callback_t callbacks;
+  callbacks.vertex_cb = onVertex;
+  callbacks.index_cb = onFace;
+  NoMaterials noMaterials;
+  std::string warnings, errors;
+  if (!tinyobj::LoadObjWithCallback(stream, callbacks, &state, &noMaterials, &warnings, &errors)) {
+    const std::string first = errors.substr(0, errors.find('\n'));
+    throwInputError(name, "not a readable OBJ file: " + (first.empty() ? "tinyobjloader failed" : first));
+  }
+  for (const auto& [face, largest] : state.forward) {
+    if (largest >= state.vertices.size()) {
+      throwInputError(name, "face " + std::to_string(face) + ": vertex index " +
+                                std::to_string(largest + uint64_t{1}) + " out of range (" +
+                                std::to_string(state.vertices.size()) + " vertices)");
+    }
+  }
+  if (state.triangles.empty()) throwInputError(name, "contains no facets");
+  out.polygonsTriangulated = state.polygons;
+  FacetSoup soup;
+  soup.corners.resize(state.triangles.size());
+  for (std::size_t i = 0; i < state.triangles.size(); ++i)
+    soup.corners[i] = state.vertices[state.triangles[i]];
+  return soup;
+}
+
+}  // namespace toposlice

@@ -1,0 +1,234 @@
+#include "io/readers/threemf_reader.h"
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <vector>
+
+#include "Model/COM/NMR_DLLInterfaces.h"
+#include "io/readers/byte_input.h"
+#include "io/readers/lib3mf_handle.h"
+
+namespace toposlice {
+namespace {
+
+constexpr int kMaxComponentDepth = 32;
+
+// Row-major 3x4 affine map, x' = m[0][0] x + m[0][1] y + m[0][2] z + m[0][3] (lib3mf's MODELTRANSFORM
+// layout).
+using Affine = std::array<std::array<double, 4>, 3>;
+
+Affine identity() {
+  return {{{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}}};
+}
+
+Affine fromLib3mf(const NMR::MODELTRANSFORM& t) {
+  Affine a;
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) a[r][c] = t.m_fFields[r][c];
+  }
+  return a;
+}
+
+// a after b: (a * b)(p) = a(b(p)).
+Affine compose(const Affine& a, const Affine& b) {
+  Affine out{};
+  for (int r = 0; r < 3; ++r) {
+    for (int c = 0; c < 4; ++c) {
+      double v = c == 3 ? a[r][3] : 0.0;
+      for (int k = 0; k < 3; ++k) v += a[r][k] * b[k][c];
+      out[r][c] = v;
+    }
+  }
+  return out;
+}
+
+double determinant(const Affine& m) {
+  return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+         m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+         m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+}
+
+class Reader {
+ public:
+  Reader(const std::string& name, double factor, ThreeMfSource& source, FacetSoup& soup)
+      : name_(name), factor_(factor), source_(source), soup_(soup) {}
+
+  void read(std::span<const std::byte> bytes) {
+    Lib3mfHandle model, reader;
+    check(NMR::lib3mf_createmodel(model.out()), nullptr, "cannot create a lib3mf model");
+    check(NMR::lib3mf_model_queryreader(model.get(), "3mf", reader.out()), model.get(),
+          "cannot create a reader");
+    // lib3mf only reads the buffer; its interface is not const-correct.
+    auto* data = const_cast<BYTE*>(reinterpret_cast<const BYTE*>(bytes.data()));
+    if (NMR::lib3mf_reader_readfrombuffer(reader.get(), data, bytes.size()) != LIB3MF_OK) {
+      throwInputError(name_, "not a valid 3MF file: " + lastError(reader.get()));
+    }
+    DWORD unit = 0;
+    check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
+    setUnit(unit);
+
+    Lib3mfHandle items;
+    check(NMR::lib3mf_model_getbuilditems(model.get(), items.out()), model.get(), "build items");
+    BOOL more = false;
+    check(NMR::lib3mf_builditemiterator_movenext(items.get(), &more), items.get(), "build items");
+    bool first = true;
+    while (more) {
+      Lib3mfHandle item, object;
+      check(NMR::lib3mf_builditemiterator_getcurrent(items.get(), item.out()), items.get(), "build item");
+      check(NMR::lib3mf_builditem_getobjectresource(item.get(), object.out()), item.get(),
+            "build item object");
+      const Affine placement = transformOf(item.get(), NMR::lib3mf_builditem_hasobjecttransform,
+                                           NMR::lib3mf_builditem_getobjecttransform, "build item transform");
+      if (first) source_.objectName = objectName(object.get());
+      first = false;
+      addObject(object.get(), placement, 0);
+      check(NMR::lib3mf_builditemiterator_movenext(items.get(), &more), items.get(), "build items");
+    }
+    if (soup_.corners.empty()) throwInputError(name_, "contains no facets");
+  }
+
+ private:
+  // The transform of a build item or component (`has` and `get` are lib3mf's functions for it), identity
+  // when it states none.
+  Affine transformOf(NMR::PLib3MFBase* owner, LIB3MFRESULT (*has)(NMR::PLib3MFBase*, BOOL*),
+                     LIB3MFRESULT (*get)(NMR::PLib3MFBase*, NMR::MODELTRANSFORM*), const char* what) const {
+    BOOL hasTransform = false;
+    check(has(owner, &hasTransform), owner, what);
+    if (!hasTransform) return identity();
+    NMR::MODELTRANSFORM t;
+    check(get(owner, &t), owner, what);
+    return fromLib3mf(t);
+  }
+
+  void setUnit(DWORD unit) {
+    struct Unit {
+      const char* name;
+      double mm;
+    };
+    static constexpr Unit kUnits[] = {{"micron", 0.001}, {"millimeter", 1.0}, {"centimeter", 10.0},
+                                      {"inch", 25.4},    {"foot", 304.8},     {"meter", 1000.0}};
+    if (unit >= std::size(kUnits)) throwInputError(name_, "unknown 3MF unit " + std::to_string(unit));
+    source_.unit = kUnits[unit].name;
+    source_.unitMm = kUnits[unit].mm;
+  }
+
+  void addObject(NMR::PLib3MFBase* object, const Affine& placement, int depth) {
+    if (depth > kMaxComponentDepth) {
+      throwInputError(name_,
+                      "components nested more than " + std::to_string(kMaxComponentDepth) + " levels deep");
+    }
+    DWORD type = 0;
+    check(NMR::lib3mf_object_gettype(object, &type), object, "object type");
+    if (type == NMR::MODELOBJECTTYPE_SUPPORT || type == NMR::MODELOBJECTTYPE_SOLIDSUPPORT) {
+      ++source_.supportsSkipped;
+      return;
+    }
+    BOOL isMesh = false, isComponents = false;
+    check(NMR::lib3mf_object_ismeshobject(object, &isMesh), object, "object");
+    if (isMesh) return addMesh(object, placement);
+    check(NMR::lib3mf_object_iscomponentsobject(object, &isComponents), object, "object");
+    if (!isComponents) return;
+    DWORD count = 0;
+    check(NMR::lib3mf_componentsobject_getcomponentcount(object, &count), object, "components");
+    for (DWORD i = 0; i < count; ++i) {
+      Lib3mfHandle component, child;
+      check(NMR::lib3mf_componentsobject_getcomponent(object, i, component.out()), object, "component");
+      check(NMR::lib3mf_component_getobjectresource(component.get(), child.out()), component.get(),
+            "component object");
+      const Affine local = transformOf(component.get(), NMR::lib3mf_component_hastransform,
+                                       NMR::lib3mf_component_gettransform, "component transform");
+      addObject(child.get(), compose(placement, local), depth + 1);
+    }
+  }
+
+  void addMesh(NMR::PLib3MFBase* mesh, const Affine& placement) {
+    DWORD vertexCount = 0, triangleCount = 0;
+    check(NMR::lib3mf_meshobject_getvertexcount(mesh, &vertexCount), mesh, "mesh");
+    check(NMR::lib3mf_meshobject_gettrianglecount(mesh, &triangleCount), mesh, "mesh");
+    if (triangleCount == 0) return;
+    vertices_.resize(vertexCount);
+    triangles_.resize(triangleCount);
+    check(NMR::lib3mf_meshobject_getvertices(mesh, vertices_.data(), vertexCount, nullptr), mesh, "vertices");
+    check(NMR::lib3mf_meshobject_gettriangleindices(mesh, triangles_.data(), triangleCount, nullptr), mesh,
+          "triangles");
+
+    const double scale = source_.unitMm * factor_;
+    placed_.resize(vertexCount);
+    for (DWORD v = 0; v < vertexCount; ++v) {
+      const float* p = vertices_[v].m_fPosition;
+      double xyz[3];
+      for (int r = 0; r < 3; ++r) {
+        const double value = scale * (placement[r][0] * p[0] + placement[r][1] * p[1] +
+                                      placement[r][2] * p[2] + placement[r][3]);
+        if (!std::isfinite(value) || std::abs(value) > std::numeric_limits<float>::max()) {
+          throwInputError(name_, "object '" + objectName(mesh) + "' vertex " + std::to_string(v) +
+                                     ": coordinate not finite or beyond float's range once placed");
+        }
+        xyz[r] = value;
+      }
+      placed_[v] = {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])};
+    }
+    const bool mirrored = determinant(placement) < 0;
+    soup_.corners.reserve(soup_.corners.size() + 3 * std::size_t{triangleCount});
+    for (DWORD t = 0; t < triangleCount; ++t) {
+      const DWORD* i = triangles_[t].m_nIndices;
+      if (i[0] >= vertexCount || i[1] >= vertexCount || i[2] >= vertexCount) {
+        throwInputError(name_, "object '" + objectName(mesh) + "' triangle " + std::to_string(t) +
+                                   ": vertex index out of range");
+      }
+      soup_.corners.push_back(placed_[i[0]]);
+      soup_.corners.push_back(placed_[mirrored ? i[2] : i[1]]);
+      soup_.corners.push_back(placed_[mirrored ? i[1] : i[2]]);
+    }
+  }
+
+  std::string objectName(NMR::PLib3MFBase* object) const {
+    ULONG needed = 0;
+    if (NMR::lib3mf_object_getnameutf8(object, nullptr, 0, &needed) != LIB3MF_OK || needed == 0) return "";
+    std::string text(needed + 1, '\0');
+    if (NMR::lib3mf_object_getnameutf8(object, text.data(), needed + 1, &needed) != LIB3MF_OK) return "";
+    text.resize(std::min<std::size_t>(needed, text.size()));
+    while (!text.empty() && text.back() == '\0') text.pop_back();
+    return text;
+  }
+
+  static std::string lastError(NMR::PLib3MFBase* instance) {
+    DWORD code = 0;
+    LPCSTR message = nullptr;
+    if (instance == nullptr || NMR::lib3mf_getlasterror(instance, &code, &message) != LIB3MF_OK) {
+      return "lib3mf gives no reason";
+    }
+    char hex[16];
+    std::snprintf(hex, sizeof hex, "0x%x", static_cast<unsigned>(code));
+    std::string text = message && *message ? message : "no message";
+    return text + " (lib3mf error " + hex + ")";
+  }
+
+  void check(LIB3MFRESULT rc, NMR::PLib3MFBase* instance, const char* what) const {
+    if (rc != LIB3MF_OK) throwInputError(name_, std::string("3MF ") + what + ": " + lastError(instance));
+  }
+
+  const std::string& name_;
+  double factor_;
+  ThreeMfSource& source_;
+  FacetSoup& soup_;
+  std::vector<NMR::MODELMESHVERTEX> vertices_;     // scratch, per mesh
+  std::vector<NMR::MODELMESHTRIANGLE> triangles_;  // scratch, per mesh
+  std::vector<Point3f> placed_;                    // scratch, per mesh
+};
+
+}  // namespace
+
+FacetSoup parseThreeMf(std::span<const std::byte> bytes, const std::string& name, double factor,
+                       ThreeMfSource* source) {
+  ThreeMfSource local;
+  ThreeMfSource& out = source ? *source : local;
+  out = ThreeMfSource{};
+  FacetSoup soup;
+  Reader(name, factor, out, soup).read(bytes);
+  return soup;
+}
+
+}  // namespace toposlice
