@@ -6,7 +6,7 @@
 
 #include "core/weld.h"
 #include "io/errors.h"
-#include "io/readers/stl_reader.h"
+#include "io/readers/mesh_reader.h"
 
 namespace toposlice {
 
@@ -16,7 +16,7 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     t.table = readTemplateFile(job.templateFile);
     t.source = "loaded " + job.templateFile.string();
   } else if (!job.templateModel.empty()) {
-    t.table = buildTemplateTable(weldCorners(readStl(job.templateModel).corners));
+    t.table = buildTemplateTable(weldCorners(readMesh(job.templateModel).corners));
     t.source = "built from " + job.templateModel.string();
     if (save && !job.templateFile.empty()) {
       if (!job.templateFile.parent_path().empty())

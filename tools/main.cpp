@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <string>
@@ -16,7 +17,7 @@
 #include "io/errors.h"
 #include "io/jobs/template_file.h"
 #include "io/output_file.h"
-#include "io/readers/stl_reader.h"
+#include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
 #include "tools/batch_command.h"
 #include "tools/progress_bar.h"
@@ -72,7 +73,28 @@ std::size_t editDistance(const std::string& a, const std::string& b) {
 struct CommonOptions {
   unsigned threads = 0;
   bool quiet = false;
+  std::string units;
+  double scale = 1.0;
+  CLI::Option* scaleOpt = nullptr;
 };
+
+// --units and --scale of the commands that read meshes.
+void addMeshOptions(CLI::App* app, CommonOptions& common) {
+  app->add_option(
+      "--units", common.units,
+      "Length of one file unit: mm (default), cm, m or in (STL, PLY and OBJ carry no units; 3MF does)");
+  common.scaleOpt =
+      app->add_option("--scale", common.scale, "Multiply every coordinate by F (after --units)");
+}
+
+MeshReadOptions meshReadOptions(const CommonOptions& common) {
+  MeshReadOptions read;
+  if (!common.units.empty()) read.unitMm = parseUnits(common.units);
+  if (!std::isfinite(common.scale) || !(common.scale > 0))
+    throw InputError("--scale " + std::to_string(common.scale) + ": expected a factor > 0");
+  read.scale = common.scale;
+  return read;
+}
 
 void addCommon(CLI::App* app, CommonOptions& common) {
   app->add_option("--threads", common.threads, "Worker threads (default: all cores)");
@@ -120,15 +142,21 @@ void printBox(const BoundingBox& b) {
               double{b.max.y} - b.min.y, double{b.max.z} - b.min.z);
 }
 
-int runInfo(const std::string& model) {
-  StlSource source;
-  const FacetSoup soup = readStl(model, &source);
+int runInfo(const std::string& model, const MeshReadOptions& read) {
+  MeshSource source;
+  const FacetSoup soup = readMesh(model, read, &source);
   const IndexedMesh mesh = weldCorners(soup.corners);
   std::vector<int32_t> table(soup.corners.size());
   const EdgeStats edges = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
   const double volume = signedVolume(soup.corners);
-  std::printf("model          : %s (%s STL%s)\n", model.c_str(), source.binary ? "binary" : "ASCII",
-              source.gzip ? ", gzip" : "");
+  std::string format = meshFormatName(source.format);
+  if (source.format == MeshFormat::Stl || source.format == MeshFormat::Ply)
+    format = (source.binary ? "binary " : "ASCII ") + format;
+  if (source.gzip) format += ", gzip";
+  if (!source.fileUnit.empty()) format += ", unit " + source.fileUnit;
+  if (source.polygonsTriangulated > 0)
+    format += ", " + std::to_string(source.polygonsTriangulated) + " polygons fan-triangulated";
+  std::printf("model          : %s (%s)\n", model.c_str(), format.c_str());
   std::printf("facets         : %zu\n", soup.facetCount());
   std::printf("vertices       : %zu (welded)\n", mesh.vertices.size());
   printBox(boundsOf(soup.corners));
@@ -210,13 +238,14 @@ int runSlice(const std::string& model, const SliceJobOptions& options, const Com
   return 0;
 }
 
-int runTemplate(const std::string& model, const std::string& output, bool force, bool quiet) {
+int runTemplate(const std::string& model, const MeshReadOptions& read, const std::string& output, bool force,
+                bool quiet) {
   const auto start = std::chrono::steady_clock::now();
   checkNotAnInput(output, {model});
   // The table is written in a transaction that commits only when no stop signal has come: an
   // interrupted run leaves no table, a finished one a complete table.
   OutputTransaction transaction;
-  const FacetSoup soup = readStl(model);
+  const FacetSoup soup = readMesh(model, read);
   const IndexedMesh mesh = weldCorners(soup.corners);
   const TemplateTable table = buildTemplateTable(mesh);
   writeTemplateFile(output, table, force);
@@ -246,10 +275,12 @@ int run(int argc, char** argv) {
 
   CLI::App* info =
       app.add_subcommand("info", "Print facets, vertices, bounds, volume, shells and edge defects");
-  info->add_option("model", model, "STL file (binary or ASCII, optionally .gz)")->required();
+  info->add_option("model", model, "Mesh file: STL, PLY, OBJ or 3MF (by content), optionally .gz")
+      ->required();
 
   CLI::App* slice = app.add_subcommand("slice", "Slice a model into per-layer contours");
-  slice->add_option("model", model, "STL file (binary or ASCII, optionally .gz)")->required();
+  slice->add_option("model", model, "Mesh file: STL, PLY, OBJ or 3MF (by content), optionally .gz")
+      ->required();
   PlaneOptions planes;
   addPlaneOptions(slice, planes);
   SliceJobOptions options;
@@ -317,7 +348,7 @@ int run(int argc, char** argv) {
       app.add_subcommand("template", "Save a template's adjacency table for its customized variants");
   std::string templateOut;
   bool templateForce = false;
-  templ->add_option("model", model, "Template STL")->required();
+  templ->add_option("model", model, "Template mesh: STL, PLY, OBJ or 3MF, optionally .gz")->required();
   templ->add_option("-o,--output", templateOut, "Table file to write (.topo)")->required();
   templ->add_flag("-f,--force", templateForce, "Replace an existing table that toposlice wrote");
 
@@ -326,6 +357,7 @@ int run(int argc, char** argv) {
   batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
 
   for (CLI::App* sub : {info, slice, templ, batch}) addCommon(sub, common);
+  for (CLI::App* sub : {info, slice, templ}) addMeshOptions(sub, common);
 
   // A first word that is no subcommand (a typo such as "slise") is named, with the nearest command.
   const std::vector<CLI::App*> commands{info, slice, templ, batch};
@@ -371,8 +403,8 @@ int run(int argc, char** argv) {
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   auto runCommand = [&]() -> int {
-    if (*info) return runInfo(model);
-    if (*templ) return runTemplate(model, templateOut, templateForce, common.quiet);
+    if (*info) return runInfo(model, meshReadOptions(common));
+    if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
     if (*batch) {
       gInterruptedMessage =
           "interrupted; the variants completed before the signal are kept, the others left nothing behind "
@@ -400,6 +432,7 @@ int run(int argc, char** argv) {
           "a template (--template)");
     needs(slice->count("--join-tolerance") > 0, method != "sr", "--join-tolerance",
           "--method cp or sr-lazy (the default sr joins segments through the adjacency table)");
+    options.read = meshReadOptions(common);
     options.planes = planeSpec(planes);
     parseSliceMethod(method, options.slice.method);
     parseCandidateSearch(candidates, options.slice.candidates);

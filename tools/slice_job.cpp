@@ -28,7 +28,6 @@
 #include "io/masks/mask_png.h"
 #include "io/masks/mask_sink.h"
 #include "io/output_file.h"
-#include "io/readers/stl_reader.h"
 #include "parallel/parallel.h"
 #include "parallel/variant_screen.h"
 
@@ -342,6 +341,10 @@ static void writeSliceSummary(const std::filesystem::path& model, const SliceJob
   nlohmann::ordered_json j;
   j["toposlice"] = TOPOSLICE_VERSION_TEXT;
   j["model"] = model.string();
+  j["format"] = std::string(meshFormatName(r.source.format)) + (r.source.gzip ? " (gzip)" : "");
+  j["units_mm"] = options.read.unitMm.value_or(1.0);
+  j["scale"] = options.read.scale;
+  j["polygons_triangulated"] = r.source.polygonsTriangulated;
   j["facets"] = r.facets;
   j["bounds_mm"] = {{"min", {r.bounds.min.x, r.bounds.min.y, r.bounds.min.z}},
                     {"max", {r.bounds.max.x, r.bounds.max.y, r.bounds.max.z}}};
@@ -414,14 +417,14 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const TemplateTable* templateTable = options.templateTable;
   if (templateTable == nullptr && !options.templateFile.empty()) {
     parallelInvoke([&] { loadedTemplate = readTemplateFile(options.templateFile); },
-                   [&] { soup = readStl(model); });
+                   [&] { soup = readMesh(model, options.read, &result.source); });
     templateTable = &loadedTemplate;
   } else {
-    soup = readStl(model);
+    soup = readMesh(model, options.read, &result.source);
   }
   std::vector<FacetSoup> features;  // add-ons first, then removals
   for (const auto* list : {&options.add, &options.remove})
-    for (const auto& path : *list) features.push_back(readStl(path));
+    for (const auto& path : *list) features.push_back(readMesh(path, options.read));
   result.readSeconds = secondsSince(start);
   result.facets = soup.facetCount();
   const SoupMeasures measures = measureSoup(soup.corners);
@@ -453,7 +456,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
 
   ContourJob job;
   job.name = model.stem().string();
-  if (job.name.size() > 4 && job.name.ends_with(".stl")) job.name.resize(job.name.size() - 4);
+  for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
+    if (job.name.size() > 4 && job.name.ends_with(ext)) job.name.resize(job.name.size() - 4);
   job.bounds = result.bounds;
   job.layerCount = static_cast<uint32_t>(planes.size());
   const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model

@@ -16,6 +16,7 @@
 #include "core/planes.h"
 #include "core/progress.h"
 #include "io/jobs/template_file.h"
+#include "io/readers/mesh_reader.h"
 #include "parallel/band_slicer.h"
 
 namespace toposlice {
@@ -33,6 +34,7 @@ struct MaskOptions {
 };
 
 struct SliceJobOptions {
+  MeshReadOptions read;  // units and scale of the model and feature files
   PlaneSpec planes;
   SliceSettings slice;
   std::vector<std::filesystem::path> outputs;  // contour files by extension: .cli, .svg
@@ -53,6 +55,7 @@ struct SliceJobOptions {
 };
 
 struct SliceJobResult {
+  MeshSource source;  // the model file's format
   uint64_t facets = 0;
   BoundingBox bounds;
   std::string topology;           // how the adjacency was obtained, for the summary
