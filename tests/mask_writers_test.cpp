@@ -660,12 +660,18 @@ TEST_F(PngDirectory, WritesOneFilePerLayer) {
   std::vector<MaskImage> masks;
   for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(31, 17, 15, 8, 3.0 + 2 * k, false));
   auto sink = makeMaskSink(out, job, false);
-  ASSERT_TRUE(sink->wantsPng());
   std::vector<uint8_t> png;
   for (uint32_t k = 0; k < 3; ++k) {
     encodeMaskPng(masks[k], png);
-    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k],
-                     k == 1 ? std::span<const uint8_t>{} : std::span<const uint8_t>(png));
+    if (k == 1) {
+      sink->writeLayer(k, 0.0125 + k * 0.025, masks[k]);
+    } else {  // the two-step path gives the same files
+      EncodedMaskLayer encoded;
+      MaskEncodeScratch scratch;
+      sink->encodeLayer(k, 0.0125 + k * 0.025, masks[k], encoded, scratch);
+      EXPECT_TRUE(encoded.bytes == png) << k;
+      sink->writeEncodedLayer(k, 0.0125 + k * 0.025, encoded);
+    }
     EXPECT_FALSE(fs::exists(out));
   }
   sink->finish(job);
@@ -731,11 +737,10 @@ TEST_F(Sl1Archive, HoldsLayersAndBothIniFiles) {
   std::vector<MaskImage> masks;
   for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(40, 30, 20, 15, 5.0 + 3 * k, true));
   auto sink = makeMaskSink(out, job, false);
-  ASSERT_TRUE(sink->wantsPng());
   std::vector<uint8_t> png;
   for (uint32_t k = 0; k < 3; ++k) {
     encodeMaskPng(masks[k], png);
-    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k], png);
+    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k]);
   }
   EXPECT_FALSE(fs::exists(out));
   job.volumeMl = 1.23456;
@@ -798,7 +803,7 @@ TEST_F(Sl1Archive, EncodesItselfWithoutPngAndIsReproducible) {
   std::vector<std::vector<uint8_t>> files;
   for (const char* name : {"a.SL1", "b.sl1s"}) {
     auto sink = makeMaskSink(dir_ / name, job, false);
-    for (uint32_t k = 0; k < 2; ++k) sink->writeLayer(k, 0.1 * k, discMask(20, 12, 10, 6, 2 + k, false), {});
+    for (uint32_t k = 0; k < 2; ++k) sink->writeLayer(k, 0.1 * k, discMask(20, 12, 10, 6, 2 + k, false));
     sink->finish(job);
     std::ifstream in(dir_ / name, std::ios::binary);
     files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -823,7 +828,7 @@ TEST_F(Sl1Archive, Zip64PastSixtyFiveThousandEntries) {
   std::vector<uint8_t> png;
   encodeMaskPng(m, png);
   auto sink = makeMaskSink(dir_ / "many.sl1", job, false);
-  for (uint32_t k = 0; k < layers; ++k) sink->writeLayer(k, 0.025 * k, m, png);
+  for (uint32_t k = 0; k < layers; ++k) sink->writeLayer(k, 0.025 * k, m);
   sink->finish(job);
   int err = 0;
   zip_t* zip = zip_open((dir_ / "many.sl1").c_str(), ZIP_RDONLY | ZIP_CHECKCONS, &err);
@@ -862,14 +867,13 @@ TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
   for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(33, 21, 16, 10, 4.0 + 2.5 * k, true));
   masks[2].pixels[0] = 255;  // pixel (0, 0): bottom-left
   auto sink = makeMaskSink(out, job, false);
-  EXPECT_FALSE(sink->wantsPng());
-  for (uint32_t k = 0; k < 3; ++k) sink->writeLayer(k, 0.0125 + k * 0.025, masks[k], {});
+  for (uint32_t k = 0; k < 3; ++k) sink->writeLayer(k, 0.0125 + k * 0.025, masks[k]);
   EXPECT_FALSE(fs::exists(out));
   sink->finish(job);
   ASSERT_TRUE(fs::is_directory(out));
   EXPECT_EQ(strayEntries(out).size(), 0u);
   for (uint32_t k = 0; k < 3; ++k) {
-    const ExrMaskLayer layer = readExrMaskLayer(out / maskLayerFileName("part", k, 3, "exr"));
+    const ExrMaskLayer layer = readExrMaskLayer(out / exrLayerFileName("part", k, 3));
     EXPECT_EQ(layer.channel, "Y");
     EXPECT_EQ(layer.width, 33u);
     EXPECT_EQ(layer.height, 21u);
@@ -884,7 +888,7 @@ TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
   }
   if (!fs::exists("/usr/bin/exrheader")) GTEST_SKIP() << "exrheader not installed (Debian package openexr)";
   int rc = -1;
-  const std::string text = runTool("/usr/bin/exrheader '" + (out / "part00001.exr").string() + "'", rc);
+  const std::string text = runTool("/usr/bin/exrheader '" + (out / "part.00001.exr").string() + "'", rc);
   EXPECT_EQ(rc, 0) << text;
   EXPECT_NE(text.find("z (type float): 0.0375"), std::string::npos) << text;
   EXPECT_NE(text.find("layer (type int): 1"), std::string::npos) << text;
@@ -909,7 +913,7 @@ std::vector<MaskImage> vdbLayers(uint32_t width, uint32_t height, uint32_t count
 }
 
 void writeAll(MaskSink& sink, const std::vector<MaskImage>& layers, double z0, double h) {
-  for (uint32_t k = 0; k < layers.size(); ++k) sink.writeLayer(k, z0 + k * h, layers[k], {});
+  for (uint32_t k = 0; k < layers.size(); ++k) sink.writeLayer(k, z0 + k * h, layers[k]);
 }
 
 TEST_F(VdbSlabs, BinaryMaskGridCountsAndTransform) {
@@ -987,7 +991,7 @@ TEST_F(VdbSlabs, MirroredImagesKeepWorldPositions) {
   job.grid.mirrorX = true;
   const fs::path out = dir_ / "m.vdb";
   auto sink = makeMaskSink(out, job, false);
-  sink->writeLayer(0, 1.0, discMask(10, 6, 5, 3, 2, false), {});
+  sink->writeLayer(0, 1.0, discMask(10, 6, 5, 3, 2, false));
   sink->finish(job);
   const auto slabs = readVdbSlabs(out);
   ASSERT_EQ(slabs.size(), 1u);
@@ -1009,8 +1013,8 @@ TEST_F(MaskStaging, InterruptedWritesLeaveNothing) {
   for (const char* name : kOutputs) {
     {
       auto sink = makeMaskSink(dir_ / name, job, false);
-      sink->writeLayer(0, 0.0125, m, {});
-      sink->writeLayer(1, 0.0375, m, {});
+      sink->writeLayer(0, 0.0125, m);
+      sink->writeLayer(1, 0.0375, m);
       EXPECT_FALSE(strayEntries().empty()) << name << ": the temporary should exist while writing";
     }  // destroyed without finish()
     EXPECT_FALSE(fs::exists(dir_ / name)) << name;
@@ -1031,7 +1035,7 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
     EXPECT_THROW(makeMaskSink(out, job, false), OutputError) << name;
     EXPECT_EQ(fs::file_size(out), 3u) << name;
     auto sink = makeMaskSink(out, job, true);
-    sink->writeLayer(0, 0.0125, m, {});
+    sink->writeLayer(0, 0.0125, m);
     sink->finish(job);
     EXPECT_TRUE(fs::exists(out)) << name;
     EXPECT_FALSE(fs::is_regular_file(out) && fs::file_size(out) == 3u) << name << " was not replaced";
@@ -1039,7 +1043,7 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
   }
   // A second run over directory outputs replaces them too.
   auto sink = makeMaskSink(dir_ / "stack", job, true);
-  sink->writeLayer(0, 0.0125, m, {});
+  sink->writeLayer(0, 0.0125, m);
   sink->finish(job);
   EXPECT_TRUE(fs::is_regular_file(dir_ / "stack" / "part00000.png"));
 }
@@ -1049,7 +1053,7 @@ TEST_F(MaskStaging, OutputCreatedMeanwhileIsNotReplaced) {
   const MaskImage m = blankMask(8, 8);
   for (const char* name : kOutputs) {
     auto sink = makeMaskSink(dir_ / name, job, false);
-    sink->writeLayer(0, 0.0125, m, {});
+    sink->writeLayer(0, 0.0125, m);
     {
       std::ofstream other(dir_ / name);
       other << "other";
@@ -1066,8 +1070,8 @@ TEST_F(MaskStaging, LayersMustArriveInOrderAtTheJobSize) {
   const MaskJob job = smallJob(8, 8, 3, false);
   for (const char* name : kOutputs) {
     auto sink = makeMaskSink(dir_ / name, job, false);
-    EXPECT_THROW(sink->writeLayer(1, 0.0, blankMask(8, 8), {}), OutputError) << name;
-    EXPECT_THROW(sink->writeLayer(0, 0.0, blankMask(9, 8), {}), OutputError) << name;
+    EXPECT_THROW(sink->writeLayer(1, 0.0, blankMask(8, 8)), OutputError) << name;
+    EXPECT_THROW(sink->writeLayer(0, 0.0, blankMask(9, 8)), OutputError) << name;
   }
   EXPECT_TRUE(strayEntries().empty());
 }
