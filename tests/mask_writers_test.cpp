@@ -26,6 +26,7 @@
 #include "io/masks/mask_sink.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
+#include "tests/tinyexr_read.h"
 
 namespace toposlice {
 namespace {
@@ -894,6 +895,103 @@ TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
   EXPECT_NE(text.find("layer (type int): 1"), std::string::npos) << text;
   EXPECT_NE(text.find("Y, 16-bit floating-point"), std::string::npos) << text;
   EXPECT_NE(text.find("zip"), std::string::npos) << text;
+}
+
+// Masks that reach every path of the EXR chunk coder: rows equal to the row above (copies), dark rows,
+// noise (chunks stored raw), widths below 4 (no copies) and over 32768 (no copies), heights that end
+// on a partial 16-line chunk, and binary masks with the rasterizer's lit extents.
+std::vector<MaskImage> exrTestMasks(bool antiAliased) {
+  std::vector<MaskImage> masks;
+  std::mt19937 rng(antiAliased ? 7 : 3);
+  auto below = [&rng](uint32_t n) { return static_cast<uint32_t>(rng() % n); };
+  const uint32_t levels = antiAliased ? 256 : 2;
+  for (const auto& [w, h] : std::vector<std::pair<uint32_t, uint32_t>>{
+           {1, 1}, {1, 17}, {2, 5}, {3, 33}, {4, 16}, {37, 50}, {300, 41}, {40000, 3}}) {
+    masks.push_back(randomRunMask(w, h, levels, 1 + w / 3, true, below));
+    masks.push_back(noiseMask(w, h, w + h, !antiAliased));
+    masks.push_back(blankMask(w, h));
+  }
+  masks.push_back(discMask(200, 90, 100, 45, 30, antiAliased));
+  MaskImage lit = blankMask(64, 40);
+  std::fill(lit.pixels.begin(), lit.pixels.end(), antiAliased ? 200 : 255);
+  masks.push_back(lit);
+  if (!antiAliased) {  // the same disc with tight lit extents, as the binary rasterizer leaves them
+    MaskImage m = discMask(200, 90, 100, 45, 30, false);
+    m.litBegin.assign(m.height, m.width);
+    m.litEnd.assign(m.height, 0);
+    for (uint32_t j = 0; j < m.height; ++j) {
+      for (uint32_t i = 0; i < m.width; ++i) {
+        if (m.pixels[size_t{j} * m.width + i] == 0) continue;
+        m.litBegin[j] = std::min(m.litBegin[j], i);
+        m.litEnd[j] = i + 1;
+      }
+    }
+    masks.push_back(m);
+  }
+  return masks;
+}
+
+TEST_F(ExrStack, IndependentReadersGetTheSl1PixelsBack) {
+  for (const bool antiAliased : {false, true}) {
+    const std::vector<MaskImage> masks = exrTestMasks(antiAliased);
+    for (size_t n = 0; n < masks.size(); ++n) {
+      const MaskImage& m = masks[n];
+      const MaskJob job = smallJob(m.width, m.height, 2, antiAliased);
+      const std::string tag = std::to_string(n) + (antiAliased ? "aa" : "bin");
+      auto exr = makeMaskSink(dir_ / (tag + ".exr"), job, false);
+      auto sl1 = makeMaskSink(dir_ / (tag + ".sl1"), job, false);
+      for (uint32_t k = 0; k < 2; ++k) {
+        exr->writeLayer(k, 0.5 + k, m);
+        sl1->writeLayer(k, 0.5 + k, m);
+      }
+      exr->finish(job);
+      sl1->finish(job);
+      const ZipContents z = readZip(dir_ / (tag + ".sl1"));
+      for (uint32_t k = 0; k < 2; ++k) {
+        MaskImage png;
+        ASSERT_TRUE(decodeMaskPng(z.entries.at(maskLayerFileName("part", k, kSl1MaxLayers, "png")), png));
+        const fs::path file = dir_ / (tag + ".exr") / exrLayerFileName("part", k, 2);
+        const TinyExrLayer t = readExrWithTinyExr(file);
+        ASSERT_EQ(t.error, "") << tag;
+        EXPECT_EQ(t.compression, "zip") << tag;
+        EXPECT_EQ(t.layer, static_cast<int>(k)) << tag;
+        EXPECT_FLOAT_EQ(t.z, static_cast<float>(0.5 + k)) << tag;
+        EXPECT_TRUE(t.exact) << tag;
+        EXPECT_TRUE(t.mask.pixels == png.pixels) << tag << " " << m.width << "x" << m.height;
+        const ExrMaskLayer o = readExrMaskLayer(file);  // OpenEXR's own reader agrees
+        ASSERT_EQ(o.values.size(), png.pixels.size()) << tag;
+        for (size_t p = 0; p < o.values.size(); ++p) {
+          ASSERT_EQ(std::lround(o.values[p] * 255.0f), png.pixels[p]) << tag << " pixel " << p;
+        }
+      }
+    }
+  }
+}
+
+TEST_F(ExrStack, TwoStepEncodingGivesTheSameFiles) {
+  const MaskImage m = discMask(300, 70, 150, 35, 25, true);
+  const MaskJob job = smallJob(300, 70, 1, true);
+  auto a = makeMaskSink(dir_ / "a.exr", job, false);
+  auto b = makeMaskSink(dir_ / "b.exr", job, false);
+  a->writeLayer(0, 0.25, m);
+  EncodedMaskLayer encoded;
+  MaskEncodeScratch scratch;
+  b->encodeLayer(0, 0.25, m, encoded, scratch);
+  b->writeEncodedLayer(0, 0.25, encoded);
+  a->finish(job);
+  b->finish(job);
+  std::ifstream fa(dir_ / "a.exr" / "part.00000.exr", std::ios::binary);
+  std::ifstream fb(dir_ / "b.exr" / "part.00000.exr", std::ios::binary);
+  const std::string sa((std::istreambuf_iterator<char>(fa)), {}),
+      sb((std::istreambuf_iterator<char>(fb)), {});
+  EXPECT_FALSE(sa.empty());
+  EXPECT_TRUE(sa == sb);
+  EXPECT_TRUE(std::string(encoded.bytes.begin(), encoded.bytes.end()) == sa);
+}
+
+TEST(ExrNames, SequenceReadersFindTheFrameNumber) {
+  EXPECT_EQ(exrLayerFileName("case0", 7, 3), "case0.00007.exr");
+  EXPECT_EQ(exrLayerFileName("", 12, 200000), "layer.000012.exr");
 }
 
 // ---------------------------------------------------------------------------------------------------
