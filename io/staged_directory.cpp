@@ -93,4 +93,27 @@ void StagedDirectory::commit() {
   std::filesystem::remove_all(old, ec);
 }
 
+void StagedDirectory::writeFile(const std::string& name, std::span<const uint8_t> data) const {
+  const std::filesystem::path file = tempPath_ / name;
+  const std::filesystem::path& context = finalPath_;
+  const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
+  if (fd < 0) throw OutputError(context.string() + ": cannot create " + file.string() + ": " + reason(errno));
+  const uint8_t* p = data.data();
+  size_t left = data.size();
+  while (left > 0) {
+    const ssize_t n = ::write(fd, p, left);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int err = n < 0 ? errno : EIO;
+      ::close(fd);
+      throw OutputError(context.string() + ": cannot write " + file.string() + ": " + reason(err));
+    }
+    p += n;
+    left -= static_cast<size_t>(n);
+  }
+  if (::close(fd) != 0) {
+    throw OutputError(context.string() + ": cannot write " + file.string() + ": " + reason(errno));
+  }
+}
+
 }  // namespace toposlice

@@ -1,7 +1,9 @@
 // StagedDirectory: the directory counterpart of OutputFile (io/output_file.h).
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
+#include <span>
 #include <string>
 
 namespace toposlice {
@@ -26,6 +28,9 @@ class StagedDirectory {
   StagedDirectory& operator=(const StagedDirectory&) = delete;
 
   void commit();  // throws OutputError; call at most once
+  // Writes a new file `name` (no separators) with `data` into the temporary directory; throws
+  // OutputError naming the final path and the file.
+  void writeFile(const std::string& name, std::span<const uint8_t> data) const;
   const std::filesystem::path& finalPath() const { return finalPath_; }
   const std::filesystem::path& tempPath() const { return tempPath_; }
 

@@ -11,6 +11,7 @@
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <zip.h>  // libzip: reads the SL1 back
 
 #include <algorithm>
 #include <cctype>
@@ -31,10 +32,12 @@
 #include <vector>
 
 #include "core/contours.h"
+#include "io/masks/exr_writer.h"
 #include "io/masks/mask_png.h"
 #include "io/readers/stl_writer.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/fixtures/winding.h"
+#include "tests/tinyexr_read.h"
 #include "tests/tool_runner.h"
 
 namespace toposlice {
@@ -281,6 +284,74 @@ TEST_F(CliToolDeterminism, ExamplePartIsByteIdenticalForEveryThreadCountAndBandS
     EXPECT_TRUE(sl1 == refSl1) << tag << ": SL1 differs from " << variants[0].first;
     EXPECT_EQ(png.size(), refPng.size()) << tag;
     EXPECT_TRUE(png == refPng) << tag << ": PNG directory differs from " << variants[0].first;
+  }
+  expectNoTemporaries();
+}
+
+// The layer PNGs of an SL1 archive, by entry name.
+std::map<std::string, std::vector<uint8_t>> sl1Layers(const fs::path& file) {
+  std::map<std::string, std::vector<uint8_t>> layers;
+  int err = 0;
+  zip_t* zip = zip_open(file.c_str(), ZIP_RDONLY, &err);
+  if (zip == nullptr) return layers;
+  for (zip_int64_t i = 0; i < zip_get_num_entries(zip, 0); ++i) {
+    zip_stat_t st;
+    zip_stat_init(&st);
+    if (zip_stat_index(zip, static_cast<zip_uint64_t>(i), 0, &st) != 0) continue;
+    const std::string name = st.name;
+    if (!name.ends_with(".png")) continue;
+    std::vector<uint8_t> data(st.size);
+    if (zip_file_t* f = zip_fopen_index(zip, static_cast<zip_uint64_t>(i), 0)) {
+      zip_fread(f, data.data(), st.size);
+      zip_fclose(f);
+    }
+    layers[name] = std::move(data);
+  }
+  zip_close(zip);
+  return layers;
+}
+
+// EXR stacks: the same bytes for every thread count and band size, and every layer, read by tinyexr,
+// the pixels of the SL1 layer of the same run (binary and anti-aliased).
+TEST_F(CliToolDeterminism, ExrStackIsByteIdenticalAndMatchesTheSl1) {
+  for (const bool antiAliased : {false, true}) {
+    std::map<std::string, std::string> reference;
+    for (const std::vector<std::string>& extra :
+         {std::vector<std::string>{"--threads", "1"}, {"--threads", "2"}, {"--band-layers", "7"}}) {
+      const std::string tag = (antiAliased ? "aa" : "bin") + extra[0].substr(2, 1) + extra[1];
+      std::vector<std::string> args{"slice", examplePart().string(), "-H", "0.1", "--printer", "sl1", "-q"};
+      if (antiAliased) args.push_back("--antialias");
+      args.insert(args.end(), extra.begin(), extra.end());
+      std::vector<std::string> exrArgs = args, sl1Args = args;
+      exrArgs.insert(exrArgs.end(), {"--masks", tag + ".exr"});
+      sl1Args.insert(sl1Args.end(), {"--masks", tag + ".sl1"});
+      const RunResult a = run(exrArgs);
+      ASSERT_EQ(a.code(), 0) << tag << ": " << a.describe();
+      const auto files = directoryContents(path(tag + ".exr"));
+      if (reference.empty()) {
+        reference = files;
+        const RunResult b = run(sl1Args);
+        ASSERT_EQ(b.code(), 0) << tag << ": " << b.describe();
+        const auto pngs = sl1Layers(path(tag + ".sl1"));
+        ASSERT_EQ(pngs.size(), 77u) << tag;  // ceil(7.7 / 0.1)
+        ASSERT_EQ(files.size(), pngs.size()) << tag;
+        uint32_t k = 0;
+        for (const auto& [name, png] : pngs) {
+          MaskImage expected;
+          ASSERT_TRUE(decodeMaskPng(png, expected)) << name;
+          const TinyExrLayer layer =
+              readExrWithTinyExr(path(tag + ".exr") / exrLayerFileName("example_part", k, 77));
+          ASSERT_EQ(layer.error, "") << tag << " layer " << k;
+          EXPECT_EQ(layer.layer, static_cast<int>(k));
+          EXPECT_TRUE(layer.exact) << tag << " layer " << k;
+          EXPECT_TRUE(layer.mask.pixels == expected.pixels)
+              << tag << " layer " << k << " differs from " << name;
+          ++k;
+        }
+        continue;
+      }
+      EXPECT_TRUE(files == reference) << tag << ": EXR stack differs from --threads 1";
+    }
   }
   expectNoTemporaries();
 }

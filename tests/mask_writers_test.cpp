@@ -26,6 +26,7 @@
 #include "io/masks/mask_sink.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
+#include "tests/tinyexr_read.h"
 
 namespace toposlice {
 namespace {
@@ -660,12 +661,18 @@ TEST_F(PngDirectory, WritesOneFilePerLayer) {
   std::vector<MaskImage> masks;
   for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(31, 17, 15, 8, 3.0 + 2 * k, false));
   auto sink = makeMaskSink(out, job, false);
-  ASSERT_TRUE(sink->wantsPng());
   std::vector<uint8_t> png;
   for (uint32_t k = 0; k < 3; ++k) {
     encodeMaskPng(masks[k], png);
-    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k],
-                     k == 1 ? std::span<const uint8_t>{} : std::span<const uint8_t>(png));
+    if (k == 1) {
+      sink->writeLayer(k, 0.0125 + k * 0.025, masks[k]);
+    } else {  // the two-step path gives the same files
+      EncodedMaskLayer encoded;
+      MaskEncodeScratch scratch;
+      sink->encodeLayer(k, 0.0125 + k * 0.025, masks[k], encoded, scratch);
+      EXPECT_TRUE(encoded.bytes == png) << k;
+      sink->writeEncodedLayer(k, 0.0125 + k * 0.025, encoded);
+    }
     EXPECT_FALSE(fs::exists(out));
   }
   sink->finish(job);
@@ -731,11 +738,10 @@ TEST_F(Sl1Archive, HoldsLayersAndBothIniFiles) {
   std::vector<MaskImage> masks;
   for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(40, 30, 20, 15, 5.0 + 3 * k, true));
   auto sink = makeMaskSink(out, job, false);
-  ASSERT_TRUE(sink->wantsPng());
   std::vector<uint8_t> png;
   for (uint32_t k = 0; k < 3; ++k) {
     encodeMaskPng(masks[k], png);
-    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k], png);
+    sink->writeLayer(k, 0.0125 + k * 0.025, masks[k]);
   }
   EXPECT_FALSE(fs::exists(out));
   job.volumeMl = 1.23456;
@@ -798,7 +804,7 @@ TEST_F(Sl1Archive, EncodesItselfWithoutPngAndIsReproducible) {
   std::vector<std::vector<uint8_t>> files;
   for (const char* name : {"a.SL1", "b.sl1s"}) {
     auto sink = makeMaskSink(dir_ / name, job, false);
-    for (uint32_t k = 0; k < 2; ++k) sink->writeLayer(k, 0.1 * k, discMask(20, 12, 10, 6, 2 + k, false), {});
+    for (uint32_t k = 0; k < 2; ++k) sink->writeLayer(k, 0.1 * k, discMask(20, 12, 10, 6, 2 + k, false));
     sink->finish(job);
     std::ifstream in(dir_ / name, std::ios::binary);
     files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
@@ -823,7 +829,7 @@ TEST_F(Sl1Archive, Zip64PastSixtyFiveThousandEntries) {
   std::vector<uint8_t> png;
   encodeMaskPng(m, png);
   auto sink = makeMaskSink(dir_ / "many.sl1", job, false);
-  for (uint32_t k = 0; k < layers; ++k) sink->writeLayer(k, 0.025 * k, m, png);
+  for (uint32_t k = 0; k < layers; ++k) sink->writeLayer(k, 0.025 * k, m);
   sink->finish(job);
   int err = 0;
   zip_t* zip = zip_open((dir_ / "many.sl1").c_str(), ZIP_RDONLY | ZIP_CHECKCONS, &err);
@@ -862,14 +868,13 @@ TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
   for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(33, 21, 16, 10, 4.0 + 2.5 * k, true));
   masks[2].pixels[0] = 255;  // pixel (0, 0): bottom-left
   auto sink = makeMaskSink(out, job, false);
-  EXPECT_FALSE(sink->wantsPng());
-  for (uint32_t k = 0; k < 3; ++k) sink->writeLayer(k, 0.0125 + k * 0.025, masks[k], {});
+  for (uint32_t k = 0; k < 3; ++k) sink->writeLayer(k, 0.0125 + k * 0.025, masks[k]);
   EXPECT_FALSE(fs::exists(out));
   sink->finish(job);
   ASSERT_TRUE(fs::is_directory(out));
   EXPECT_EQ(strayEntries(out).size(), 0u);
   for (uint32_t k = 0; k < 3; ++k) {
-    const ExrMaskLayer layer = readExrMaskLayer(out / maskLayerFileName("part", k, 3, "exr"));
+    const ExrMaskLayer layer = readExrMaskLayer(out / exrLayerFileName("part", k, 3));
     EXPECT_EQ(layer.channel, "Y");
     EXPECT_EQ(layer.width, 33u);
     EXPECT_EQ(layer.height, 21u);
@@ -884,12 +889,109 @@ TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
   }
   if (!fs::exists("/usr/bin/exrheader")) GTEST_SKIP() << "exrheader not installed (Debian package openexr)";
   int rc = -1;
-  const std::string text = runTool("/usr/bin/exrheader '" + (out / "part00001.exr").string() + "'", rc);
+  const std::string text = runTool("/usr/bin/exrheader '" + (out / "part.00001.exr").string() + "'", rc);
   EXPECT_EQ(rc, 0) << text;
   EXPECT_NE(text.find("z (type float): 0.0375"), std::string::npos) << text;
   EXPECT_NE(text.find("layer (type int): 1"), std::string::npos) << text;
   EXPECT_NE(text.find("Y, 16-bit floating-point"), std::string::npos) << text;
   EXPECT_NE(text.find("zip"), std::string::npos) << text;
+}
+
+// Masks that reach every path of the EXR chunk coder: rows equal to the row above (copies), dark rows,
+// noise (chunks stored raw), widths below 4 (no copies) and over 32768 (no copies), heights that end
+// on a partial 16-line chunk, and binary masks with the rasterizer's lit extents.
+std::vector<MaskImage> exrTestMasks(bool antiAliased) {
+  std::vector<MaskImage> masks;
+  std::mt19937 rng(antiAliased ? 7 : 3);
+  auto below = [&rng](uint32_t n) { return static_cast<uint32_t>(rng() % n); };
+  const uint32_t levels = antiAliased ? 256 : 2;
+  for (const auto& [w, h] : std::vector<std::pair<uint32_t, uint32_t>>{
+           {1, 1}, {1, 17}, {2, 5}, {3, 33}, {4, 16}, {37, 50}, {300, 41}, {40000, 3}}) {
+    masks.push_back(randomRunMask(w, h, levels, 1 + w / 3, true, below));
+    masks.push_back(noiseMask(w, h, w + h, !antiAliased));
+    masks.push_back(blankMask(w, h));
+  }
+  masks.push_back(discMask(200, 90, 100, 45, 30, antiAliased));
+  MaskImage lit = blankMask(64, 40);
+  std::fill(lit.pixels.begin(), lit.pixels.end(), antiAliased ? 200 : 255);
+  masks.push_back(lit);
+  if (!antiAliased) {  // the same disc with tight lit extents, as the binary rasterizer leaves them
+    MaskImage m = discMask(200, 90, 100, 45, 30, false);
+    m.litBegin.assign(m.height, m.width);
+    m.litEnd.assign(m.height, 0);
+    for (uint32_t j = 0; j < m.height; ++j) {
+      for (uint32_t i = 0; i < m.width; ++i) {
+        if (m.pixels[size_t{j} * m.width + i] == 0) continue;
+        m.litBegin[j] = std::min(m.litBegin[j], i);
+        m.litEnd[j] = i + 1;
+      }
+    }
+    masks.push_back(m);
+  }
+  return masks;
+}
+
+TEST_F(ExrStack, IndependentReadersGetTheSl1PixelsBack) {
+  for (const bool antiAliased : {false, true}) {
+    const std::vector<MaskImage> masks = exrTestMasks(antiAliased);
+    for (size_t n = 0; n < masks.size(); ++n) {
+      const MaskImage& m = masks[n];
+      const MaskJob job = smallJob(m.width, m.height, 2, antiAliased);
+      const std::string tag = std::to_string(n) + (antiAliased ? "aa" : "bin");
+      auto exr = makeMaskSink(dir_ / (tag + ".exr"), job, false);
+      auto sl1 = makeMaskSink(dir_ / (tag + ".sl1"), job, false);
+      for (uint32_t k = 0; k < 2; ++k) {
+        exr->writeLayer(k, 0.5 + k, m);
+        sl1->writeLayer(k, 0.5 + k, m);
+      }
+      exr->finish(job);
+      sl1->finish(job);
+      const ZipContents z = readZip(dir_ / (tag + ".sl1"));
+      for (uint32_t k = 0; k < 2; ++k) {
+        MaskImage png;
+        ASSERT_TRUE(decodeMaskPng(z.entries.at(maskLayerFileName("part", k, kSl1MaxLayers, "png")), png));
+        const fs::path file = dir_ / (tag + ".exr") / exrLayerFileName("part", k, 2);
+        const TinyExrLayer t = readExrWithTinyExr(file);
+        ASSERT_EQ(t.error, "") << tag;
+        EXPECT_EQ(t.compression, "zip") << tag;
+        EXPECT_EQ(t.layer, static_cast<int>(k)) << tag;
+        EXPECT_FLOAT_EQ(t.z, static_cast<float>(0.5 + k)) << tag;
+        EXPECT_TRUE(t.exact) << tag;
+        EXPECT_TRUE(t.mask.pixels == png.pixels) << tag << " " << m.width << "x" << m.height;
+        const ExrMaskLayer o = readExrMaskLayer(file);  // OpenEXR's own reader agrees
+        ASSERT_EQ(o.values.size(), png.pixels.size()) << tag;
+        for (size_t p = 0; p < o.values.size(); ++p) {
+          ASSERT_EQ(std::lround(o.values[p] * 255.0f), png.pixels[p]) << tag << " pixel " << p;
+        }
+      }
+    }
+  }
+}
+
+TEST_F(ExrStack, TwoStepEncodingGivesTheSameFiles) {
+  const MaskImage m = discMask(300, 70, 150, 35, 25, true);
+  const MaskJob job = smallJob(300, 70, 1, true);
+  auto a = makeMaskSink(dir_ / "a.exr", job, false);
+  auto b = makeMaskSink(dir_ / "b.exr", job, false);
+  a->writeLayer(0, 0.25, m);
+  EncodedMaskLayer encoded;
+  MaskEncodeScratch scratch;
+  b->encodeLayer(0, 0.25, m, encoded, scratch);
+  b->writeEncodedLayer(0, 0.25, encoded);
+  a->finish(job);
+  b->finish(job);
+  std::ifstream fa(dir_ / "a.exr" / "part.00000.exr", std::ios::binary);
+  std::ifstream fb(dir_ / "b.exr" / "part.00000.exr", std::ios::binary);
+  const std::string sa((std::istreambuf_iterator<char>(fa)), {}),
+      sb((std::istreambuf_iterator<char>(fb)), {});
+  EXPECT_FALSE(sa.empty());
+  EXPECT_TRUE(sa == sb);
+  EXPECT_TRUE(std::string(encoded.bytes.begin(), encoded.bytes.end()) == sa);
+}
+
+TEST(ExrNames, SequenceReadersFindTheFrameNumber) {
+  EXPECT_EQ(exrLayerFileName("case0", 7, 3), "case0.00007.exr");
+  EXPECT_EQ(exrLayerFileName("", 12, 200000), "layer.000012.exr");
 }
 
 // ---------------------------------------------------------------------------------------------------
@@ -909,7 +1011,7 @@ std::vector<MaskImage> vdbLayers(uint32_t width, uint32_t height, uint32_t count
 }
 
 void writeAll(MaskSink& sink, const std::vector<MaskImage>& layers, double z0, double h) {
-  for (uint32_t k = 0; k < layers.size(); ++k) sink.writeLayer(k, z0 + k * h, layers[k], {});
+  for (uint32_t k = 0; k < layers.size(); ++k) sink.writeLayer(k, z0 + k * h, layers[k]);
 }
 
 TEST_F(VdbSlabs, BinaryMaskGridCountsAndTransform) {
@@ -987,7 +1089,7 @@ TEST_F(VdbSlabs, MirroredImagesKeepWorldPositions) {
   job.grid.mirrorX = true;
   const fs::path out = dir_ / "m.vdb";
   auto sink = makeMaskSink(out, job, false);
-  sink->writeLayer(0, 1.0, discMask(10, 6, 5, 3, 2, false), {});
+  sink->writeLayer(0, 1.0, discMask(10, 6, 5, 3, 2, false));
   sink->finish(job);
   const auto slabs = readVdbSlabs(out);
   ASSERT_EQ(slabs.size(), 1u);
@@ -1009,8 +1111,8 @@ TEST_F(MaskStaging, InterruptedWritesLeaveNothing) {
   for (const char* name : kOutputs) {
     {
       auto sink = makeMaskSink(dir_ / name, job, false);
-      sink->writeLayer(0, 0.0125, m, {});
-      sink->writeLayer(1, 0.0375, m, {});
+      sink->writeLayer(0, 0.0125, m);
+      sink->writeLayer(1, 0.0375, m);
       EXPECT_FALSE(strayEntries().empty()) << name << ": the temporary should exist while writing";
     }  // destroyed without finish()
     EXPECT_FALSE(fs::exists(dir_ / name)) << name;
@@ -1040,7 +1142,7 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
     EXPECT_THROW(makeMaskSink(out, job, false), OutputError) << name;
     EXPECT_EQ(fs::is_directory(out) ? std::uintmax_t{0} : fs::file_size(out), before) << name;
     auto sink = makeMaskSink(out, job, true);
-    sink->writeLayer(0, 0.0125, m, {});
+    sink->writeLayer(0, 0.0125, m);
     sink->finish(job);
     EXPECT_TRUE(fs::exists(out)) << name;
     EXPECT_FALSE(fs::exists(out / "old00000.png") || fs::exists(out / "old00000.exr")) << name;
@@ -1049,7 +1151,7 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
   }
   // A second run over directory outputs replaces them too.
   auto sink = makeMaskSink(dir_ / "stack", job, true);
-  sink->writeLayer(0, 0.0125, m, {});
+  sink->writeLayer(0, 0.0125, m);
   sink->finish(job);
   EXPECT_TRUE(fs::is_regular_file(dir_ / "stack" / "part00000.png"));
 }
@@ -1089,7 +1191,7 @@ TEST_F(MaskStaging, OutputCreatedMeanwhileIsNotReplaced) {
   const MaskImage m = blankMask(8, 8);
   for (const char* name : kOutputs) {
     auto sink = makeMaskSink(dir_ / name, job, false);
-    sink->writeLayer(0, 0.0125, m, {});
+    sink->writeLayer(0, 0.0125, m);
     {
       std::ofstream other(dir_ / name);
       other << "other";
@@ -1106,8 +1208,8 @@ TEST_F(MaskStaging, LayersMustArriveInOrderAtTheJobSize) {
   const MaskJob job = smallJob(8, 8, 3, false);
   for (const char* name : kOutputs) {
     auto sink = makeMaskSink(dir_ / name, job, false);
-    EXPECT_THROW(sink->writeLayer(1, 0.0, blankMask(8, 8), {}), OutputError) << name;
-    EXPECT_THROW(sink->writeLayer(0, 0.0, blankMask(9, 8), {}), OutputError) << name;
+    EXPECT_THROW(sink->writeLayer(1, 0.0, blankMask(8, 8)), OutputError) << name;
+    EXPECT_THROW(sink->writeLayer(0, 0.0, blankMask(9, 8)), OutputError) << name;
   }
   EXPECT_TRUE(strayEntries().empty());
 }

@@ -2,7 +2,6 @@
 
 #include <sys/resource.h>
 #include <sys/stat.h>
-#include <zlib.h>
 
 #include <algorithm>
 #include <chrono>
@@ -13,7 +12,6 @@
 #include <nlohmann/json.hpp>
 
 #include "core/crossing.h"
-#include "core/mask_runs.h"
 #include "core/mesh_info.h"
 #include "core/number_text.h"
 #include "core/printer.h"
@@ -25,7 +23,6 @@
 #include "io/contours/threemf_writer.h"
 #include "io/errors.h"
 #include "io/jobs/layer_report.h"
-#include "io/masks/mask_png.h"
 #include "io/masks/mask_sink.h"
 #include "io/output_file.h"
 #include "parallel/parallel.h"
@@ -497,8 +494,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const std::size_t addCount = options.add.size();
 
   struct LayerResult {
-    std::vector<uint8_t> payload;  // PNG bytes or mask runs
-    uint32_t crc = 0;              // CRC-32 of a PNG payload (zip entries need it)
+    EncodedMaskLayer encoded;  // the mask as the sink encoded it (a PNG, an EXR file, mask runs)
     double area = 0;
     uint64_t islands = 0;
   };
@@ -507,22 +503,19 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     MaskImage mask;
     std::vector<ContourSet> sets;
     std::vector<LayerResult> layers;
-    MaskPngScratch pngScratch;
+    MaskEncodeScratch encodeScratch;
   };
   const BandPlan plan = planBands(planes.size(), options.slice);
   std::vector<SlotState> slots(plan.slots);
   for (SlotState& s : slots) s.layers.resize(plan.bandLayers);
-  const bool png = maskSink && maskSink->wantsPng();
-  MaskImage decoded;
-  decoded.width = maskJob.grid.width;
-  decoded.height = maskJob.grid.height;
   double volumeMm3 = 0;
 
   LayerStages stages;
   // Per-layer area and islands feed the masks (the archive's resin volume) and the report; a contour-only
   // run without a report prints no volume, so it skips that pass over every point.
   const bool measureLayers = masks || report;
-  stages.process = [&](uint32_t, std::span<const LayerContours> layer, std::size_t slot, uint32_t position) {
+  stages.process = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
+                       uint32_t position) {
     if (!measureLayers) return;
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
@@ -550,25 +543,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster, &lit);
       r.area = static_cast<double>(lit) * maskJob.grid.pixel * maskJob.grid.pixel;
     }
-    if (png) {
-      encodeMaskPng(s.mask, r.payload, s.pngScratch);
-      r.crc = static_cast<uint32_t>(crc32_z(0, r.payload.data(), r.payload.size()));
-    } else {
-      encodeMaskRuns(s.mask, r.payload);
-    }
+    maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
                        uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
     for (auto& sink : sinks) sink->writeLayer(k, layer);
-    if (maskSink) {
-      if (png) {
-        maskSink->writePngLayer(k, planes[k], decoded, r.payload, r.crc);
-      } else {
-        decodeMaskRuns(r.payload, decoded);
-        maskSink->writeLayer(k, planes[k], decoded, {});
-      }
-    }
+    if (maskSink) maskSink->writeEncodedLayer(k, planes[k], r.encoded);
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
     volumeMm3 += r.area * layerThickness(planes, k, options.planes);
   };

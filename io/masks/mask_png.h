@@ -1,8 +1,9 @@
-// Mask layers as 8-bit grayscale PNG, and the PNG-directory sink (docs/FORMATS.md).
+// Mask layers as 8-bit grayscale PNG (docs/FORMATS.md), for the PNG directory and SL1 writers.
 //
-// The encoder is specialised for masks: filter type 0 on every row, and a deflate stream (RFC 1951)
-// whose only matches are runs (distance 1) and rows equal to the row above (distance width + 1). A
-// first pass turns the image into these tokens (2 bytes each, in MaskPngScratch) and counts them; the
+// The encoder is specialised for masks: filter type 0 on every row, and a deflate stream (RFC 1951,
+// RunDeflater in deflate_runs.h) whose only matches are runs (distance 1) and rows equal to the row
+// above (distance width + 1). A first pass turns the image into these tokens (2 bytes each, in
+// MaskPngScratch) and counts them; the
 // zlib Adler-32 comes from the runs in closed form instead of byte by byte. A second pass builds
 // length-limited canonical Huffman codes from the counts (package-merge) and writes one block with this
 // dynamic code (RFC 1951 3.2.7), or with the fixed code (3.2.6) when that is not larger, e.g. for tiny
@@ -13,25 +14,21 @@
 #pragma once
 
 #include <cstdint>
-#include <filesystem>
-#include <memory>
 #include <span>
 #include <vector>
 
 #include "core/mask_image.h"
-#include "io/masks/mask_sink.h"
+#include "io/masks/deflate_runs.h"
 
 namespace toposlice {
 
 // Reusable buffer of encodeMaskPng (one per thread): the deflate tokens of the largest image so far,
 // 2 bytes per token; at most 2 (width + 1) height bytes (noise), a few hundred kB for busy mask layers.
-struct MaskPngScratch {
-  std::vector<uint16_t> tokens;
-};
+using MaskPngScratch = DeflateScratch;
 
 // Which Huffman code encodeMaskPng may use: `smallest` (dynamic or fixed, whichever gives fewer bits;
 // the fixed one on a tie) or always `fixed` (for tests and comparisons).
-enum class MaskPngCode { smallest, fixed };
+using MaskPngCode = DeflateCode;
 
 // Encodes `mask` (width, height >= 1, pixels.size() == width * height) as an 8-bit grayscale PNG into
 // `out` (replaced; its capacity is reused, so pass the same vector and scratch for every layer). PNG
@@ -45,10 +42,5 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out);
 // Decodes a PNG of any grayscale bit depth <= 8 into `mask` (rows bottom-up again, as MaskImage stores
 // them). Returns false for a malformed file or a colour / 16-bit image. Meant for tests and checks.
 bool decodeMaskPng(std::span<const uint8_t> png, MaskImage& mask);
-
-// Directory "<path>/" of "<name>00000.png", ... (maskLayerFileName). The directory is written under a
-// temporary name (StagedDirectory) and renamed at finish().
-std::unique_ptr<MaskSink> makePngDirectorySink(const std::filesystem::path& path, const MaskJob& job,
-                                               bool overwrite);
 
 }  // namespace toposlice

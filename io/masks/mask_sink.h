@@ -4,9 +4,11 @@
 // - Layers arrive in order, index 0, 1, 2, ... (one thread at a time; a sink is not thread-safe), each
 //   a MaskImage of exactly job.grid.width x job.grid.height. Memory never grows with the layer count:
 //   a sink keeps at most one slab of layers (VDB) plus per-file bookkeeping.
-// - PNG-based sinks (wantsPng() == true) take the layer as pre-encoded PNG bytes (encodeMaskPng), so
-//   the caller can encode in parallel; they encode `mask` themselves when `png` is empty. Other sinks
-//   read `mask` and ignore `png`.
+// - A layer goes in either whole (writeLayer) or in two steps (encodeLayer, then writeEncodedLayer), so
+//   that the caller can encode layers in parallel and only write them in order: encodeLayer is
+//   thread-safe and may run for many layers at once; writeEncodedLayer takes its results in layer order.
+//   Both ways give the same bytes. Sinks that store each layer as bytes of its own (PNG directory, SL1,
+//   EXR) encode those bytes there; the default hands the layer over as mask runs (core/mask_runs.h).
 // - Nothing appears under the final path until finish() returns: output goes to a temporary beside it
 //   ("<final>.tmp-<pid>-<n>") and is renamed into place at the end. A sink destroyed without finish()
 //   (an exception, a cancelled run) removes its temporary. Without `overwrite`, an existing final path
@@ -17,10 +19,11 @@
 #include <cstdint>
 #include <filesystem>
 #include <memory>
-#include <span>
 #include <string>
+#include <vector>
 
 #include "core/mask_image.h"
+#include "io/masks/deflate_runs.h"
 #include "io/staged_directory.h"
 
 namespace toposlice {
@@ -43,24 +46,53 @@ struct MaskJob {
   uint32_t fadeLayers = 10;           // layers of that fade, at least 2 for the SL1 firmware
 };
 
+// One layer as encodeLayer leaves it for writeEncodedLayer.
+struct EncodedMaskLayer {
+  std::vector<uint8_t> bytes;      // what the sink stores (a PNG, an EXR file) or, by default, mask runs
+  uint32_t crc32 = 0;              // CRC-32 of `bytes` where the sink needs one (zip entries)
+  uint32_t width = 0, height = 0;  // the image's size (the runs need it)
+};
+
+// Reusable buffers of encodeLayer, one per thread; each sink uses the parts it needs.
+struct MaskEncodeScratch {
+  DeflateScratch deflate;
+  std::vector<uint8_t> bytes;
+  std::vector<uint32_t> runs;
+};
+
 class MaskSink {
  public:
   virtual ~MaskSink() = default;
-  // PNG-based sinks take pre-encoded PNG bytes so encoding can run in parallel elsewhere; other sinks
-  // take the image.
-  virtual bool wantsPng() const { return false; }
-  // Layer `index` (0-based, in order) cut at height z (mm). `png` is encodeMaskPng(mask) or empty.
-  virtual void writeLayer(uint32_t index, double z, const MaskImage& mask, std::span<const uint8_t> png) = 0;
-  // The same for a PNG sink, with the CRC-32 of `png` already computed (in the parallel stage), so the
-  // in-order writer does not checksum every byte again. Default: writeLayer.
-  virtual void writePngLayer(uint32_t index, double z, const MaskImage& mask, std::span<const uint8_t> png,
-                             uint32_t pngCrc32) {
-    (void)pngCrc32;
-    writeLayer(index, z, mask, png);
-  }
+  // Layer `index` (0-based, in order) cut at height z (mm).
+  virtual void writeLayer(uint32_t index, double z, const MaskImage& mask) = 0;
+  // Encodes layer `index` into `out` (replaced; its capacity reused). Thread-safe: reads only what the
+  // sink was created with; any thread, any layers at once, each call with scratch of its own. Throws
+  // OutputError for a mask not of the job's size. Default: the layer's runs (encodeMaskRuns).
+  virtual void encodeLayer(uint32_t index, double z, const MaskImage& mask, EncodedMaskLayer& out,
+                           MaskEncodeScratch& scratch) const;
+  // Writes what encodeLayer made of layer `index`, in order, as writeLayer would have. Default: decodes
+  // the runs and calls writeLayer.
+  virtual void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer);
   // Completes the output and moves it under its final name. finalJob is the job as known at the end
-  // (volumeMl filled); the layer count written is the number of writeLayer calls. Call at most once.
+  // (volumeMl filled); the layer count written is the number of layers written. Call at most once.
   virtual void finish(const MaskJob& finalJob) = 0;
+
+ private:
+  MaskImage decoded_;  // the default writeEncodedLayer's image
+};
+
+// Base of the sinks that encode each layer into the bytes they store: writeLayer is encodeLayer then
+// writeEncodedLayer on the calling thread, so both ways give the same bytes by construction.
+class EncodingMaskSink : public MaskSink {
+ public:
+  void writeLayer(uint32_t index, double z, const MaskImage& mask) final;
+  void encodeLayer(uint32_t index, double z, const MaskImage& mask, EncodedMaskLayer& out,
+                   MaskEncodeScratch& scratch) const override = 0;
+  void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) override = 0;
+
+ private:
+  EncodedMaskLayer layer_;
+  MaskEncodeScratch scratch_;
 };
 
 // Picks the writer by extension (case-insensitive): .sl1/.sl1s -> SL1 archive, .exr -> directory of
@@ -73,5 +105,11 @@ std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const 
 // separators and control characters replaced by '_' ("layer" when empty).
 std::string maskLayerFileName(const std::string& name, uint32_t index, uint32_t layerCount, const char* ext);
 std::string maskFilePrefix(const std::string& name);
+// The zero-padded index alone, as in maskLayerFileName.
+std::string maskLayerNumber(uint32_t index, uint32_t layerCount);
+
+// Throws OutputError naming `output` and layer `index` when `mask` is not width x height of `grid`.
+void checkMaskLayerSize(const MaskImage& mask, const PixelGrid& grid, const std::filesystem::path& output,
+                        uint32_t index);
 
 }  // namespace toposlice

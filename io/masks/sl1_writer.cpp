@@ -22,6 +22,7 @@
 #include <minizip/zip.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include "io/errors.h"
 #include "io/masks/mask_png.h"
@@ -145,7 +146,7 @@ std::string errorText(int code) {
   return code == ZIP_ERRNO ? std::generic_category().message(errno) : "zip error " + std::to_string(code);
 }
 
-class Sl1Sink final : public MaskSink {
+class Sl1Sink final : public EncodingMaskSink {
  public:
   Sl1Sink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
       : file_(path, overwrite), job_(job), created_(creationTime(job)) {
@@ -174,30 +175,20 @@ class Sl1Sink final : public MaskSink {
     if (zip_ != nullptr) zipClose(zip_, nullptr);  // then file_ removes the temporary
   }
 
-  bool wantsPng() const override { return true; }
+  // The layer's PNG and its CRC-32: the zip entry is then written raw, without a second pass over it.
+  void encodeLayer(uint32_t index, double /*z*/, const MaskImage& mask, EncodedMaskLayer& out,
+                   MaskEncodeScratch& scratch) const override {
+    checkMaskLayerSize(mask, job_.grid, file_.finalPath(), index);
+    encodeMaskPng(mask, out.bytes, scratch.deflate);
+    out.crc32 = static_cast<uint32_t>(crc32_z(0, out.bytes.data(), out.bytes.size()));
+  }
 
-  void writeLayer(uint32_t index, double /*z*/, const MaskImage& mask,
-                  std::span<const uint8_t> png) override {
+  void writeEncodedLayer(uint32_t index, double /*z*/, const EncodedMaskLayer& layer) override {
     if (index != next_ || index >= kSl1MaxLayers) {
       throw OutputError(file_.finalPath().string() + ": layer " + std::to_string(index) +
                         " arrived, expected " + std::to_string(next_));
     }
-    if (png.empty()) {
-      if (mask.width != job_.grid.width || mask.height != job_.grid.height) {
-        throw OutputError(file_.finalPath().string() + ": layer " + std::to_string(index) +
-                          " does not match the job's image size");
-      }
-      encodeMaskPng(mask, scratch_, pngScratch_);
-      png = scratch_;
-    }
-    addEntry(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), png);
-    ++next_;
-  }
-
-  void writePngLayer(uint32_t index, double z, const MaskImage& mask, std::span<const uint8_t> png,
-                     uint32_t pngCrc32) override {
-    if (png.empty() || index != next_ || index >= kSl1MaxLayers) return writeLayer(index, z, mask, png);
-    addEntry(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), png, pngCrc32);
+    addEntry(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), layer.bytes, layer.crc32);
     ++next_;
   }
 
@@ -238,8 +229,6 @@ class Sl1Sink final : public MaskSink {
   std::time_t created_;
   zipFile zip_ = nullptr;
   zip_fileinfo info_{};
-  std::vector<uint8_t> scratch_;
-  MaskPngScratch pngScratch_;
   uint32_t next_ = 0;
 };
 

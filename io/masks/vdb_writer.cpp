@@ -117,8 +117,7 @@ class VdbSink final : public MaskSink {
     }
   }
 
-  void writeLayer(uint32_t index, double z, const MaskImage& mask,
-                  std::span<const uint8_t> /*png*/) override {
+  void writeLayer(uint32_t index, double z, const MaskImage& mask) override {
     const std::string where = file_.finalPath().string() + ": layer " + std::to_string(index);
     if (index != next_) throw OutputError(where + " arrived, expected " + std::to_string(next_));
     if (mask.width != job_.grid.width || mask.height != job_.grid.height || mask.pixels.size() != plane_) {

@@ -1,0 +1,81 @@
+// The sink factory, layer file names, and the default two-step path of MaskSink (mask_sink.h).
+#include "io/masks/mask_sink.h"
+
+#include <algorithm>
+#include <cstdio>
+
+#include "core/mask_runs.h"
+#include "io/errors.h"
+#include "io/masks/exr_writer.h"
+#include "io/masks/png_directory_writer.h"
+#include "io/masks/sl1_writer.h"
+#include "io/masks/vdb_writer.h"
+
+namespace toposlice {
+
+void MaskSink::encodeLayer(uint32_t /*index*/, double /*z*/, const MaskImage& mask, EncodedMaskLayer& out,
+                           MaskEncodeScratch& /*scratch*/) const {
+  encodeMaskRuns(mask, out.bytes);
+  out.crc32 = 0;
+  out.width = mask.width;
+  out.height = mask.height;
+}
+
+void MaskSink::writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) {
+  decoded_.width = layer.width;
+  decoded_.height = layer.height;
+  decoded_.litBegin.clear();
+  decoded_.litEnd.clear();
+  if (!decodeMaskRuns(layer.bytes, decoded_)) {
+    throw OutputError("layer " + std::to_string(index) + ": malformed mask runs");
+  }
+  writeLayer(index, z, decoded_);
+}
+
+void EncodingMaskSink::writeLayer(uint32_t index, double z, const MaskImage& mask) {
+  encodeLayer(index, z, mask, layer_, scratch_);
+  writeEncodedLayer(index, z, layer_);
+}
+
+void checkMaskLayerSize(const MaskImage& mask, const PixelGrid& grid, const std::filesystem::path& output,
+                        uint32_t index) {
+  if (mask.width != grid.width || mask.height != grid.height ||
+      mask.pixels.size() != size_t{grid.width} * grid.height) {
+    throw OutputError(output.string() + ": layer " + std::to_string(index) +
+                      " does not match the job's image size");
+  }
+}
+
+std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const MaskJob& job,
+                                       bool overwrite) {
+  std::string ext = path.extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](char c) { return static_cast<char>(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c); });
+  if (ext == ".sl1" || ext == ".sl1s") return makeSl1Sink(path, job, overwrite);
+  if (ext == ".exr") return makeExrSink(path, job, overwrite);
+  if (ext == ".vdb") return makeVdbSink(path, job, overwrite);
+  return makePngDirectorySink(path, job, overwrite);
+}
+
+std::string maskFilePrefix(const std::string& name) {
+  if (name.empty()) return "layer";
+  std::string prefix = name;
+  for (char& c : prefix) {
+    if (c == '/' || c == '\\' || static_cast<unsigned char>(c) < 0x20 || c == 0x7F) c = '_';
+  }
+  return prefix;
+}
+
+std::string maskLayerNumber(uint32_t index, uint32_t layerCount) {
+  int digits = 5;
+  for (uint64_t limit = 100000; layerCount > limit; limit *= 10) ++digits;
+  char number[16];
+  std::snprintf(number, sizeof number, "%0*u", digits, index);
+  return number;
+}
+
+std::string maskLayerFileName(const std::string& name, uint32_t index, uint32_t layerCount, const char* ext) {
+  return maskFilePrefix(name) + maskLayerNumber(index, layerCount) + "." + ext;
+}
+
+}  // namespace toposlice
