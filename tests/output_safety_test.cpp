@@ -367,6 +367,58 @@ TEST_F(Messages, HelpListsEveryContourFormatAndThePixelNeed) {
 }
 
 // ---------------------------------------------------------------------------------------------------
+// Mesh formats through the program: recognised by content, with units.
+
+using MeshInput = CliToolBase;
+
+TEST_F(MeshInput, PlyAndObjSliceLikeTheirStlSiblings) {
+  for (const char* stem : {"knee_femur_ssm_S001", "knee_tibia_ssm_S001"}) {
+    const fs::path ply = sharedModel(std::string(stem) + ".ply"),
+                   stl = sharedModel(std::string(stem) + ".stl");
+    if (!fs::exists(ply) || !fs::exists(stl)) GTEST_SKIP() << ply << " not found";
+    // Misnamed on purpose: the format comes from the content.
+    fs::copy_file(ply, path("scan.stl"));
+    ASSERT_EQ(run({"slice", "scan.stl", "-H", "1", "--report", "a.csv", "-q"}).code(), 0);
+    ASSERT_EQ(run({"slice", stl.string(), "-H", "1", "--report", "b.csv", "-q"}).code(), 0);
+    EXPECT_EQ(readBytes(path("a.csv")), readBytes(path("b.csv"))) << stem;
+    fs::remove(path("scan.stl"));
+    fs::remove(path("a.csv"));
+    fs::remove(path("b.csv"));
+  }
+}
+
+TEST_F(MeshInput, MetreSizedObjWithUnits) {
+  const fs::path obj = sharedModel("human_body_smpl_female.obj");
+  if (!fs::exists(obj)) GTEST_SKIP() << obj << " not found";
+  const RunResult r = run({"slice", obj.string(), "--units", "m", "-H", "5", "--summary", "s.json", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  const auto j = nlohmann::json::parse(readBytes(path("s.json")));
+  EXPECT_EQ(j["format"], "OBJ");
+  EXPECT_EQ(j["units_mm"].get<double>(), 1000.0);
+  // A human body: tens of litres, 1.5 to 2 m tall.
+  EXPECT_GT(j["volume_ml"].get<double>(), 30000.0);
+  EXPECT_LT(j["volume_ml"].get<double>(), 150000.0);
+  double height = 0;  // SMPL bodies stand along y
+  for (int axis = 0; axis < 3; ++axis)
+    height = std::max(height,
+                      j["bounds_mm"]["max"][axis].get<double>() - j["bounds_mm"]["min"][axis].get<double>());
+  EXPECT_GT(height, 1400.0);
+  EXPECT_LT(height, 2100.0);
+}
+
+TEST_F(MeshInput, TextFileIsNotAMeshAndBadUnitsAreNamed) {
+  writeBytes(path("notes.stl"), "Dear colleague,\nthe aligner files follow tomorrow.\n");
+  const RunResult r = run({"slice", "notes.stl", "-o", "a.cli"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "notes.stl: not a mesh file")) << r.err;
+  EXPECT_FALSE(contains(r.err, "truncated")) << r.err;
+  const RunResult units = run({"slice", examplePart().string(), "--units", "furlong", "-o", "a.cli"});
+  expectOneErrorLine(units);
+  EXPECT_TRUE(contains(units.err, "--units")) << units.err;
+  EXPECT_FALSE(fs::exists(path("a.cli")));
+}
+
+// ---------------------------------------------------------------------------------------------------
 // The machine-readable summary, and numbers that read back exactly.
 
 TEST_F(Summary, JsonSummaryHasTheCountsVolumeAndOutputs) {

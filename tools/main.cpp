@@ -214,7 +214,7 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
   std::printf("time       : read %.3f s, weld+adjacency %.3f s, slice%s %.3f s, total %.3f s\n",
               r.readSeconds, r.topologySeconds, r.written.empty() ? "" : "+write", r.sliceSeconds,
               r.readSeconds + r.topologySeconds + r.sliceSeconds);
-  if (!options.masks.output.empty() || !options.report.empty())
+  if (!options.masks.output.empty() || !options.report.empty() || !options.summary.empty())
     std::printf("resin      : %.4f ml\n", r.volumeMl);
   std::printf("peak memory: %.1f MiB\n", peakResidentMiB());
   for (const auto& path : r.written) std::printf("wrote      : %s\n", path.c_str());

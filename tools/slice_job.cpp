@@ -513,7 +513,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   LayerStages stages;
   // Per-layer area and islands feed the masks (the archive's resin volume) and the report; a contour-only
   // run without a report prints no volume, so it skips that pass over every point.
-  const bool measureLayers = masks || report;
+  const bool measureLayers = masks || report || !options.summary.empty();
   stages.process = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
                        uint32_t position) {
     if (!measureLayers) return;
