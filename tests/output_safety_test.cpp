@@ -406,6 +406,27 @@ TEST_F(MeshInput, MetreSizedObjWithUnits) {
   EXPECT_LT(height, 2100.0);
 }
 
+TEST_F(MeshInput, BatchJobsTakeUnitsAndScale) {
+  const fs::path obj = sharedModel("human_body_smpl_male.obj");
+  if (!fs::exists(obj)) GTEST_SKIP() << obj << " not found";
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": " + jsonString(obj.string()) +
+                 "}, \"settings\": {\"layer_height\": 20, \"units\": \"m\", \"scale\": 0.5},"
+                 " \"variants\": [{\"name\": \"m\", \"model\": " +
+                 jsonString(obj.string()) + ", \"contours\": \"m.cli\"}]}");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  // The same bytes as the slice command with the same units and scale, and not the millimetre reading.
+  ASSERT_EQ(
+      run({"slice", obj.string(), "-H", "20", "--units", "m", "--scale", "0.5", "-o", "s.cli", "-q"}).code(),
+      0);
+  EXPECT_EQ(readBytes(path("m.cli")), readBytes(path("s.cli")));
+  const std::string cli = readBytes(path("m.cli"));
+  const auto at = cli.find("$$LAYERS/");
+  ASSERT_NE(at, std::string::npos);
+  EXPECT_GE(std::stoi(cli.substr(at + 9)), 5);  // the body is 0.2-0.3 m deep along z: 145 mm at scale 0.5
+}
+
 TEST_F(MeshInput, TextFileIsNotAMeshAndBadUnitsAreNamed) {
   writeBytes(path("notes.stl"), "Dear colleague,\nthe aligner files follow tomorrow.\n");
   const RunResult r = run({"slice", "notes.stl", "-o", "a.cli"});

@@ -16,7 +16,8 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     t.table = readTemplateFile(job.templateFile);
     t.source = "loaded " + job.templateFile.string();
   } else if (!job.templateModel.empty()) {
-    t.table = buildTemplateTable(weldCorners(readMesh(job.templateModel).corners));
+    t.table = buildTemplateTable(
+        weldCorners(readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale}).corners));
     t.source = "built from " + job.templateModel.string();
     if (save && !job.templateFile.empty()) {
       if (!job.templateFile.parent_path().empty())
@@ -48,6 +49,8 @@ bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
 SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,
                                   const TemplateTable& table) {
   SliceJobOptions o;
+  o.read.unitMm = job.unitMm;
+  o.read.scale = job.scale;
   o.planes.layerHeight = job.layerHeight;
   o.planes.layers = job.layers;
   o.planes.z0 = job.z0;

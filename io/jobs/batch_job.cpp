@@ -284,7 +284,7 @@ class JobParser {
     object(*v, at);
     checkKeys(*v, at,
               {"layer_height", "layers", "z0", "z", "method", "join_tolerance", "printer", "pixel", "origin",
-               "resolution", "mirror", "antialias", "cli_binary", "threads", "overwrite"});
+               "resolution", "mirror", "antialias", "cli_binary", "threads", "overwrite", "units", "scale"});
     const auto key = [&](std::string_view k) { return childPath(at, k); };
     if (const Json* x = find(*v, "layer_height")) job_.layerHeight = positive(*x, key("layer_height"));
     if (const Json* x = find(*v, "layers")) {
@@ -346,6 +346,17 @@ class JobParser {
     if (const Json* x = find(*v, "threads"))
       job_.threads = static_cast<uint32_t>(whole(*x, key("threads"), 0, 4096));
     if (const Json* x = find(*v, "overwrite")) job_.overwrite = boolean(*x, key("overwrite"));
+    if (const Json* x = find(*v, "units")) {
+      const std::string units = string(*x, key("units"));
+      static const std::pair<const char*, double> kUnits[] = {
+          {"mm", 1.0}, {"cm", 10.0}, {"m", 1000.0}, {"in", 25.4}};
+      const auto* found =
+          std::find_if(std::begin(kUnits), std::end(kUnits), [&](const auto& u) { return units == u.first; });
+      if (found == std::end(kUnits))
+        fail(key("units"), "unknown unit " + inQuotes(units) + " (expected mm, cm, m or in)");
+      job_.unitMm = found->second;
+    }
+    if (const Json* x = find(*v, "scale")) job_.scale = positive(*x, key("scale"));
   }
 
   std::vector<fs::path> inputList(const Json& v, const std::string& at) {

@@ -51,8 +51,10 @@ struct BatchJob {
   bool cliBinary = false;                             // .cli contours in binary CLI (else ASCII)
   uint32_t threads = 0;                               // 0: all cores
   bool overwrite = false;                             // replace existing outputs
-  std::vector<BatchVariant> variants;                 // at least one
-  std::filesystem::path sourceFile;  // the job file (readBatchJob); empty when parsed from text
+  std::optional<double> unitMm;        // "units": mm per file unit of the meshes (mm, cm, m, in)
+  double scale = 1.0;                  // "scale": multiplies every coordinate after units
+  std::vector<BatchVariant> variants;  // at least one
+  std::filesystem::path sourceFile;    // the job file (readBatchJob); empty when parsed from text
 };
 
 // Output extensions accepted for BatchVariant::contours and ::masks (lower case, with the dot).
