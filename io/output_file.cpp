@@ -10,6 +10,7 @@
 #include <system_error>
 
 #include <fcntl.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include "io/errors.h"
@@ -229,6 +230,19 @@ void OutputFile::commit() {
   committed_ = true;
   unregisterPendingOutput(registrySlot_);
   registrySlot_ = -1;
+}
+
+std::string writeFailureReason(const std::filesystem::path& file, int savedErrno,
+                               const std::string& libraryMessage) {
+  if (savedErrno == ENOSPC || savedErrno == EDQUOT || savedErrno == EFBIG || savedErrno == EIO ||
+      savedErrno == EROFS)
+    return reason(savedErrno) + " (" + libraryMessage + ")";
+  std::filesystem::path folder = file.parent_path();
+  if (folder.empty()) folder = ".";
+  struct statvfs fs {};
+  if (::statvfs(folder.c_str(), &fs) == 0 && fs.f_bavail == 0)
+    return reason(ENOSPC) + " (" + libraryMessage + ")";
+  return libraryMessage;
 }
 
 std::string cannotCreateMessage(const std::filesystem::path& path, int err) {

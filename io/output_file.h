@@ -100,6 +100,13 @@ std::string outputExistsMessage(const std::filesystem::path& path);
 // 'out'" (EACCES/EPERM), or "<path>: cannot create: <strerror>".
 std::string cannotCreateMessage(const std::filesystem::path& path, int err);
 
+// The reason to give when a library that writes `file` itself (OpenVDB, OpenEXR) reports a failed write
+// in its own words ("IoError: write failed"): the system's reason when `savedErrno` (errno as the
+// exception was caught) names a write failure, or "No space left on device" when the file system of
+// `file` has no free block left, else the library's message.
+std::string writeFailureReason(const std::filesystem::path& file, int savedErrno,
+                               const std::string& libraryMessage);
+
 // What an output is, for the overwrite check.
 enum class OutputKind { File, LayerFolder };
 

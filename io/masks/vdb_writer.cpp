@@ -4,6 +4,7 @@
 #include "io/masks/vdb_module.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <exception>
@@ -113,7 +114,9 @@ class VdbSink final : public MaskSink {
     try {
       archive_.emplace(file_.tempPath(), fileMeta);  // writes through its own handle; file_ renames it
     } catch (const std::exception& e) {
-      throw OutputError(path.string() + ": " + e.what());
+      const int err = errno;
+      throw OutputError(path.string() +
+                        ": cannot write: " + writeFailureReason(file_.tempPath(), err, e.what()));
     }
   }
 
@@ -136,7 +139,9 @@ class VdbSink final : public MaskSink {
     try {
       archive_->close();
     } catch (const std::exception& e) {
-      throw OutputError(file_.finalPath().string() + ": " + e.what());
+      const int err = errno;
+      throw OutputError(file_.finalPath().string() +
+                        ": cannot write: " + writeFailureReason(file_.tempPath(), err, e.what()));
     }
     archive_.reset();
     file_.commit();
@@ -220,7 +225,9 @@ class VdbSink final : public MaskSink {
     try {
       archive_->writeSlab(grid_);
     } catch (const std::exception& e) {
-      throw OutputError(file_.finalPath().string() + ": " + e.what());
+      const int err = errno;
+      throw OutputError(file_.finalPath().string() +
+                        ": cannot write: " + writeFailureReason(file_.tempPath(), err, e.what()));
     }
     grid_ = GridT::create();
     slabLayers_ = 0;
