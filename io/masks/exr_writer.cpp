@@ -177,36 +177,25 @@ void keepError(exr_const_context_t ctxt, exr_result_t, const char* message) {
   }
 }
 
-class ExrSink final : public EncodingMaskSink {
+class ExrSink final : public LayerFolderSink {
  public:
   ExrSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
-      : dir_(path, overwrite, ".exr"), job_(job) {}
+      : LayerFolderSink(path, job, overwrite, ".exr") {}
 
   void encodeLayer(uint32_t index, double z, const MaskImage& mask, EncodedMaskLayer& out,
                    MaskEncodeScratch& scratch) const override {
-    checkMaskLayerSize(mask, job_.grid, dir_.finalPath(), index);
+    checkMaskLayerSize(mask, job().grid, finalPath(), index);
     try {
-      encodeExrMaskLayer(mask, job_, index, z, out.bytes, scratch);
+      encodeExrMaskLayer(mask, job(), index, z, out.bytes, scratch);
     } catch (const OutputError& e) {
-      throw OutputError(dir_.finalPath().string() + ": " + e.what());
+      throw OutputError(finalPath().string() + ": " + e.what());
     }
   }
 
-  void writeEncodedLayer(uint32_t index, double /*z*/, const EncodedMaskLayer& layer) override {
-    if (index != next_) {
-      throw OutputError(dir_.finalPath().string() + ": layer " + std::to_string(index) +
-                        " arrived, expected " + std::to_string(next_));
-    }
-    dir_.writeFile(exrLayerFileName(job_.name, index, job_.layerCount), layer.bytes);
-    ++next_;
+ protected:
+  std::string layerFileName(uint32_t index) const override {
+    return exrLayerFileName(job().name, index, job().layerCount);
   }
-
-  void finish(const MaskJob& /*finalJob*/) override { dir_.commit(); }
-
- private:
-  StagedDirectory dir_;
-  MaskJob job_;
-  uint32_t next_ = 0;
 };
 
 }  // namespace

@@ -78,4 +78,21 @@ std::string maskLayerFileName(const std::string& name, uint32_t index, uint32_t 
   return maskFilePrefix(name) + maskLayerNumber(index, layerCount) + "." + ext;
 }
 
+LayerFolderSink::LayerFolderSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite,
+                                 std::string layerExt)
+    : dir_(path, overwrite, std::move(layerExt)), job_(job) {}
+
+void LayerFolderSink::writeEncodedLayer(uint32_t index, double /*z*/, const EncodedMaskLayer& layer) {
+  if (index != next_) {
+    throw OutputError(dir_.finalPath().string() + ": layer " + std::to_string(index) + " arrived, expected " +
+                      std::to_string(next_));
+  }
+  dir_.writeFile(layerFileName(index), layer.bytes);
+  ++next_;
+}
+
+void LayerFolderSink::finish(const MaskJob& /*finalJob*/) {
+  dir_.commit();
+}
+
 }  // namespace toposlice

@@ -95,6 +95,28 @@ class EncodingMaskSink : public MaskSink {
   MaskEncodeScratch scratch_;
 };
 
+// Base of the sinks that store each layer as a file of its own in a folder (PNG and EXR stacks): the
+// folder is staged (io/staged_directory.h) and committed by finish(); layers are written in order under
+// layerFileName(index). Derived sinks provide encodeLayer and the file name.
+class LayerFolderSink : public EncodingMaskSink {
+ public:
+  // layerExt: the extension of the layer files (".png", ".exr"), for StagedDirectory's overwrite check.
+  LayerFolderSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite,
+                  std::string layerExt);
+  void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) final;
+  void finish(const MaskJob& finalJob) override;
+
+ protected:
+  virtual std::string layerFileName(uint32_t index) const = 0;
+  const std::filesystem::path& finalPath() const { return dir_.finalPath(); }
+  const MaskJob& job() const { return job_; }
+
+ private:
+  StagedDirectory dir_;
+  MaskJob job_;
+  uint32_t next_ = 0;
+};
+
 // Picks the writer by extension (case-insensitive): .sl1/.sl1s -> SL1 archive, .exr -> directory of
 // OpenEXR files, .vdb -> OpenVDB file, anything else -> directory of PNGs. Throws OutputError when the
 // output exists and !overwrite or cannot be created.

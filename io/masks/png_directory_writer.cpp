@@ -9,32 +9,21 @@
 namespace toposlice {
 namespace {
 
-class PngDirectorySink final : public EncodingMaskSink {
+class PngDirectorySink final : public LayerFolderSink {
  public:
   PngDirectorySink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
-      : dir_(path, overwrite, ".png"), job_(job) {}
+      : LayerFolderSink(path, job, overwrite, ".png") {}
 
   void encodeLayer(uint32_t index, double /*z*/, const MaskImage& mask, EncodedMaskLayer& out,
                    MaskEncodeScratch& scratch) const override {
-    checkMaskLayerSize(mask, job_.grid, dir_.finalPath(), index);
+    checkMaskLayerSize(mask, job().grid, finalPath(), index);
     encodeMaskPng(mask, out.bytes, scratch.deflate);
   }
 
-  void writeEncodedLayer(uint32_t index, double /*z*/, const EncodedMaskLayer& layer) override {
-    if (index != next_) {
-      throw OutputError(dir_.finalPath().string() + ": layer " + std::to_string(index) +
-                        " arrived, expected " + std::to_string(next_));
-    }
-    dir_.writeFile(maskLayerFileName(job_.name, index, job_.layerCount, "png"), layer.bytes);
-    ++next_;
+ protected:
+  std::string layerFileName(uint32_t index) const override {
+    return maskLayerFileName(job().name, index, job().layerCount, "png");
   }
-
-  void finish(const MaskJob& /*finalJob*/) override { dir_.commit(); }
-
- private:
-  StagedDirectory dir_;
-  MaskJob job_;
-  uint32_t next_ = 0;
 };
 
 }  // namespace
