@@ -15,6 +15,7 @@
 #include <string>
 #include <vector>
 
+#include <zip.h>
 #include <nlohmann/json.hpp>
 
 #include "tests/tool_runner.h"
@@ -456,6 +457,35 @@ TEST_F(Summary, JsonSummaryHasTheCountsVolumeAndOutputs) {
   EXPECT_TRUE(j["warnings"].empty());
   // The CSV is plain rows (no trailer), and the SL1 carries the layer height as given.
   for (const auto& line : splitLines(readBytes(path("r.csv")))) EXPECT_FALSE(line.starts_with("#")) << line;
+}
+
+// An entry of a zip archive, read with libzip (not the writer's minizip).
+std::string zipEntry(const fs::path& archive, const char* name) {
+  int err = 0;
+  zip_t* zip = zip_open(archive.c_str(), ZIP_RDONLY, &err);
+  if (zip == nullptr) return {};
+  std::string text;
+  if (zip_file_t* f = zip_fopen(zip, name, 0)) {
+    char buffer[4096];
+    for (zip_int64_t n; (n = zip_fread(f, buffer, sizeof buffer)) > 0;)
+      text.append(buffer, static_cast<std::size_t>(n));
+    zip_fclose(f);
+  }
+  zip_close(zip);
+  return text;
+}
+
+TEST_F(Summary, Sl1NumbersReadBackAsGiven) {
+  ASSERT_EQ(run({"slice", examplePart().string(), "-H", "0.01", "--masks", "m.sl1", "--printer", "sl1", "-q"})
+                .code(),
+            0);
+  const std::string config = zipEntry(path("m.sl1"), "config.ini");
+  const std::string prusa = zipEntry(path("m.sl1"), "prusaslicer.ini");
+  EXPECT_TRUE(contains(config, "layerHeight = 0.01\n")) << config;
+  EXPECT_TRUE(contains(prusa, "layer_height = 0.01\n")) << prusa;
+  EXPECT_TRUE(contains(prusa, "display_width = 120.96\n")) << prusa;
+  EXPECT_FALSE(contains(config + prusa, "00000000"))
+      << config << prusa;  // no 0.009999999999999998-style values
 }
 
 }  // namespace

@@ -268,7 +268,11 @@ std::string sl1ConfigIni(const MaskJob& job, uint32_t layers, std::time_t create
 }
 
 std::string sl1PrusaSlicerIni(const MaskJob& job, uint32_t layers) {
-  const double width = job.grid.width * job.grid.pixel, height = job.grid.height * job.grid.pixel;
+  // Display sizes are products (pixels x pitch): rounded to a nanometre, so 2560 x 0.04725 prints as the
+  // 120.96 a user reads on the printer, not 120.96000000000001.
+  const auto nanometres = [](double mm) { return std::round(mm * 1e6) / 1e6; };
+  const double width = nanometres(job.grid.width * job.grid.pixel),
+               height = nanometres(job.grid.height * job.grid.pixel);
   const double printHeight = std::max(150.0, std::ceil(layers * job.layerHeight));
   IniMap m;
   m["absolute_correction"] = "0";
