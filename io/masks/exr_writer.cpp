@@ -14,6 +14,7 @@
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfIntAttribute.h>
 #include <OpenEXR/ImfOutputFile.h>
+#include <OpenEXR/ImfStringAttribute.h>
 #include <OpenEXR/ImfThreading.h>
 #include <OpenEXR/ImfVecAttribute.h>
 
@@ -59,6 +60,8 @@ class ExrSink final : public MaskSink {
                                                            static_cast<float>(job_.grid.y0))));
       header.insert("mirrorX", Imf::IntAttribute(job_.grid.mirrorX ? 1 : 0));
       header.insert("mirrorY", Imf::IntAttribute(job_.grid.mirrorY ? 1 : 0));
+      for (const auto& [key, value] : job_.settings)  // the printer and material settings (mask_sink.h)
+        header.insert("toposlice:" + key, Imf::StringAttribute(value));
       Imf::OutputFile file((dir_.tempPath() / name).c_str(), header);
       Imf::FrameBuffer frame;
       frame.insert(kChannel, Imf::Slice(Imf::HALF, reinterpret_cast<char*>(rows_.data()), sizeof(Imath::half),
