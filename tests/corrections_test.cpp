@@ -67,7 +67,9 @@ TEST(PolygonOffset, PolygonalCylinderKeepsItsShape) {
   addPolygon(disc, 1, 2, r, n);
   for (const double d : {0.05, -0.05, 0.2}) {
     const double expected = n * (apothem + d) * (apothem + d) * std::tan(std::numbers::pi / n);
-    EXPECT_NEAR(correctedArea(disc, {d, 0, 0}), expected, 1e-4) << d;
+    // Outline cleaning before the offset moves the outline by at most 0.5 um (polygon_offset.h): here
+    // it drops every other vertex of the 360-gon (its sagitta over two edges is 0.46 um).
+    EXPECT_NEAR(correctedArea(disc, {d, 0, 0}), expected, 2 * std::numbers::pi * (r + d) * 0.0005) << d;
   }
 }
 
