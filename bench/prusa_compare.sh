@@ -14,6 +14,9 @@
 #       PRUSA_ORIENTATION, PRUSA_MIRROR_X, PRUSA_MIRROR_Y
 #                      PrusaSlicer's display settings (default: the Original Prusa SL1 preset: portrait, 1, 0)
 #       THREADS        toposlice --threads (default: all cores; PrusaSlicer always uses all cores)
+#       CORRECTIONS    printer corrections given to both, by their shared names, e.g.
+#                      "--absolute-correction 0.05 --elefant-foot-compensation 0.2 --relative-correction-x 1.02"
+#                      (PrusaSlicer's option names are toposlice's: see docs/FORMATS.md, "Profile files")
 #
 # How the two are made to mean the same thing by pixel (i, j) and layer k:
 # - Printer: PrusaSlicer gets the Original Prusa SL1 preset's printer settings (bed 1.48..119.48 x
@@ -116,7 +119,7 @@ topo_out=$work/toposlice.sl1
 rm -f "$prusa_out" "$topo_out"
 prusa_cmd=(prusa-slicer --export-sla --load "$work/sl1_printer.ini" --layer-height "$h" --initial-layer-height "$h"
   --gamma-correction 0 --slice-closing-radius 0 --no-supports-enable --no-pad-enable --no-hollowing-enable
-  --center 60.48,34.02 --dont-arrange --loglevel 1 --output "$prusa_out" "$stl")
+  --center 60.48,34.02 --dont-arrange --loglevel 1 ${CORRECTIONS:-} --output "$prusa_out" "$stl")
 
 elapsed_s() {  # "Elapsed (wall clock) time (h:mm:ss or m:ss): 1:02.34" -> seconds
   awk -F': ' '/Elapsed \(wall clock\)/ { n = split($2, t, ":"); s = 0; for (i = 1; i <= n; ++i) s = s * 60 + t[i]; printf "%.2f", s }' "$1"
@@ -145,6 +148,8 @@ else
   [ "$mirror_y" = 1 ] && topo_flags+=(--mirror-x)
 fi
 [ -n "${THREADS:-}" ] && topo_flags+=(--threads "$THREADS")
+# shellcheck disable=SC2206  # CORRECTIONS is a list of options, split on purpose
+topo_flags+=(${CORRECTIONS:-})
 topo_cmd=("$toposlice" slice "$stl" --layer-height "$h" --layers "$layers" --printer sl1 "${topo_flags[@]}"
   --masks "$topo_out" --quiet)
 load_before_topo=$(uptime)
@@ -166,7 +171,7 @@ read -r amin amed amean < <(awk '/^per-layer agreement/ { print $4, $7, $10 }' "
 ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f", a / b }'; }
 {
   echo
-  echo "## PrusaSlicer vs toposlice: $(basename "$model"), layer height $h mm, SL1 2560 x 1440 at 0.04725 mm, binary masks"
+  echo "## PrusaSlicer vs toposlice: $(basename "$model"), layer height $h mm, SL1 2560 x 1440 at 0.04725 mm, binary masks${CORRECTIONS:+, $CORRECTIONS}"
   echo
   echo "| | PrusaSlicer $(dpkg-query -W -f '${Version}' prusa-slicer 2>/dev/null || echo '?') | toposlice | PrusaSlicer / toposlice |"
   echo "|---|---|---|---|"
@@ -180,6 +185,7 @@ ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f", a / b }'; }
   echo "| layers compared | $compared (PrusaSlicer's layer k with toposlice's layer k) |"
   echo "| per layer: min / median / mean | $amin % / $amed % / $amean % |"
   echo "| overall (all pixels of all layers) | $agree % ($differ pixels differ) |"
+  echo "| lit pixels summed over layers: toposlice / PrusaSlicer | $(awk -F, 'NR > 1 { a += $6; b += $7 } END { printf "%d / %d (%+.3f %%)", a, b, 100 * (a - b) / b }' "$work/agreement.csv") |"
   echo
   echo "- machine: $(nproc) cores, $(awk '/MemTotal/ { printf "%.0f GB", $2 / 1048576 }' /proc/meminfo); load average (1, 5, 15 min) before PrusaSlicer:$(echo "$load_before_prusa" | sed 's/.*load average: */ /'), before toposlice:$(echo "$load_before_topo" | sed 's/.*load average: */ /'), after:$(uptime | sed 's/.*load average: */ /')"
   echo "- PrusaSlicer: ${prusa_cmd[*]}"

@@ -72,12 +72,14 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
   o.masks.mirrorX = job.mirrorX.value_or(false);
   o.masks.mirrorY = job.mirrorY.value_or(false);
   o.masks.antialias = job.antialias;
+  o.print = resolvePrintSettings(
+      {job.profile, job.printer, job.material, job.printSettings, "batch job print_settings"});
   o.add = variant.add;
   o.remove = variant.remove;
   o.report = variant.report;
   // No output of the job may replace one of its inputs, even through a link: the job file, the
   // template's model and table, and every variant's meshes.
-  o.otherInputs = {job.sourceFile, job.templateModel, job.templateFile};
+  o.otherInputs = {job.sourceFile, job.templateModel, job.templateFile, job.profile, o.print.lightMap};
   for (const BatchVariant& v : job.variants) {
     o.otherInputs.push_back(v.model);
     o.otherInputs.insert(o.otherInputs.end(), v.add.begin(), v.add.end());

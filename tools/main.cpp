@@ -11,10 +11,12 @@
 #include <vector>
 
 #include "core/mesh_info.h"
+#include "core/number_text.h"
 #include "core/planes.h"
 #include "core/printer.h"
 #include "core/weld.h"
 #include "io/errors.h"
+#include "io/jobs/profile.h"
 #include "io/jobs/template_file.h"
 #include "io/output_file.h"
 #include "io/readers/mesh_reader.h"
@@ -220,6 +222,45 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
   for (const auto& path : r.written) std::printf("wrote      : %s\n", path.c_str());
 }
 
+// --explain: the resolved printer, material and correction settings, each with where it came from, and
+// what the job will do with them; nothing is read or written.
+int explainSettings(const std::string& model, const SliceJobOptions& options) {
+  const PrintSettings& p = options.print;
+  std::printf("model      : %s\n", model.c_str());
+  std::printf("printer    : %s\n",
+              p.printerName.empty() ? "(none: --resolution and --pixel)" : p.printerName.c_str());
+  std::printf("material   : %s\n", p.materialName.c_str());
+  for (const auto& [key, value] : settingValues(p)) {
+    const auto origin = p.origin.find(key);
+    std::printf("  %-26s = %-12s %s\n", key.c_str(), value.empty() ? "(unset)" : value.c_str(),
+                origin == p.origin.end() ? "(default)" : ("(" + origin->second + ")").c_str());
+  }
+  const auto scale = p.scale();
+  std::printf("scaling    : x %s, y %s, z %s about the bounding-box centre in x and y and the lowest z%s\n",
+              formatNumber(scale[0]).c_str(), formatNumber(scale[1]).c_str(), formatNumber(scale[2]).c_str(),
+              p.scales() ? "" : " (none)");
+  std::printf(
+      "offsets    : absolute %s mm on every layer; elephant foot %s mm on layer 0%s, sparing features "
+      "narrower than %s mm\n",
+      formatNumber(p.absoluteCorrection).c_str(), formatNumber(p.elefantFootCompensation).c_str(),
+      p.elefantFootLayers > 1 ? (", fading over " + std::to_string(p.elefantFootLayers) + " layers").c_str()
+                              : "",
+      formatNumber(p.elefantFootMinWidth).c_str());
+  const bool antialias = options.masks.antialias || (p.gammaCorrection && *p.gammaCorrection > 0);
+  if (options.masks.output.empty()) {
+    std::printf("masks      : none (contours only: exposure, gamma and light map unused)\n");
+  } else {
+    std::printf("masks      : %s, %s%s%s\n", options.masks.output.c_str(),
+                antialias ? "anti-aliased, gamma " : "binary (pixel-centre rule)",
+                antialias ? formatNumber(p.gammaCorrection.value_or(1.0)).c_str() : "",
+                p.lightMap.empty() ? "" : (", light map " + p.lightMap.string()).c_str());
+    std::printf("exposure   : %s s, first layer %s s, faded over %u layers\n",
+                formatNumber(p.exposureTime).c_str(), formatNumber(p.initialExposureTime).c_str(),
+                p.fadedLayers);
+  }
+  return 0;
+}
+
 int runSlice(const std::string& model, const SliceJobOptions& options, const CommonOptions& common) {
   SliceJobResult result;
   {
@@ -323,6 +364,27 @@ int run(int argc, char** argv) {
   slice->add_flag("--mirror-y", options.masks.mirrorY, "Mirror the masks in y");
   slice->add_flag("--antialias", options.masks.antialias, "Anti-aliased masks (covered fraction, 8-bit)");
   slice->add_flag("--crop", options.masks.crop, "Allow a model larger than the image (cut off at its edges)");
+  // Printer and material settings (io/jobs/profile.h): profiles, then one option per key.
+  std::string profilePath, material;
+  std::vector<std::string> setAssignments;
+  bool explain = false;
+  slice->add_option("--profile", profilePath,
+                    "Profile file (JSON) of printers and materials (docs/FORMATS.md, \"Profile files\")");
+  slice->add_option("--material", material,
+                    "Material preset (" + builtInMaterialNames() + ") or a material of --profile");
+  slice->add_option("--set", setAssignments,
+                    "KEY=VALUE: set any printer or material key (repeatable; after the options below)");
+  slice->add_flag("--explain", explain,
+                  "Print the printer, material and correction settings the job would use, then stop");
+  const std::span<const SettingKey> keys = settingKeys();
+  std::vector<std::string> keyValues(keys.size());
+  std::vector<std::string> keyOptions(keys.size());
+  for (std::size_t i = 0; i < keys.size(); ++i) {
+    keyOptions[i] = "--" + std::string(keys[i].name);
+    std::replace(keyOptions[i].begin(), keyOptions[i].end(), '_', '-');
+    slice->add_option(keyOptions[i], keyValues[i], keys[i].help)
+        ->group(keys[i].owner == SettingOwner::Printer ? "Printer settings" : "Material settings");
+  }
   std::vector<std::string> addFeatures, removeFeatures;
   slice->add_option("--add", addFeatures, "Add-on feature mesh, sliced on its own (repeatable)");
   slice->add_option("--remove", removeFeatures,
@@ -425,8 +487,8 @@ int run(int argc, char** argv) {
     needs(slice->count("--svg-layers") > 0, anySvg, "--svg-layers", "an .svg output (-o FILE.svg)");
     needs(options.cliBinary, anyCli, "--cli-binary", "a .cli output (-o FILE.cli)");
     const bool masks = !options.masks.output.empty();
-    for (const char* opt : {"--printer", "--pixel", "--resolution", "--origin", "--mirror-x", "--mirror-y",
-                            "--antialias", "--crop"})
+    for (const char* opt :
+         {"--pixel", "--resolution", "--origin", "--mirror-x", "--mirror-y", "--antialias", "--crop"})
       needs(slice->count(opt) > 0, masks, opt, "mask output (--masks)");
     needs(slice->count("--on-mismatch") > 0, !templatePath.empty(), "--on-mismatch",
           "a template (--template)");
@@ -455,6 +517,31 @@ int run(int argc, char** argv) {
       if (std::sscanf(origin.c_str(), "%lf,%lf%c", &x, &y, &extra) != 2)
         throw InputError("--origin '" + origin + "': expected X,Y in mm");
       options.masks.origin = std::pair<double, double>{x, y};
+    }
+    ProfileChoice choice{profilePath, options.masks.printer, material, {}, "command line"};
+    for (std::size_t i = 0; i < keys.size(); ++i)
+      if (slice->count(keyOptions[i]) > 0) choice.overrides.emplace_back(keys[i].name, keyValues[i]);
+    for (const std::string& assignment : setAssignments) {
+      const std::size_t eq = assignment.find('=');
+      if (eq == std::string::npos || eq == 0)
+        throw InputError("--set '" + assignment + "': expected KEY=VALUE, e.g. exposure_time=6");
+      choice.overrides.emplace_back(assignment.substr(0, eq), assignment.substr(eq + 1));
+    }
+    options.print = resolvePrintSettings(choice);
+    if (explain) return explainSettings(model, options);
+    const PrintSettings& print = options.print;
+    needs(slice->count("--printer") > 0,
+          masks || print.scales() || print.absoluteCorrection != 0 || print.elefantFootCompensation > 0,
+          "--printer", "mask output (--masks), or a printer whose corrections change the contours");
+    // Settings given here that only the masks use do nothing without them.
+    for (const auto& [key, value] : choice.overrides) {
+      const std::string k = key;
+      const bool maskOnly = k.starts_with("display_") || k == "printer_model" || k == "gamma_correction" ||
+                            k == "light_map" || k == "exposure_time" || k == "initial_exposure_time" ||
+                            k == "faded_layers";
+      needs(maskOnly, masks, ("--" + k).c_str(), "mask output (--masks)");
+      needs(k.starts_with("elefant_foot_") && k != "elefant_foot_compensation",
+            options.print.elefantFootCompensation > 0, ("--" + k).c_str(), "elefant_foot_compensation > 0");
     }
     options.rebuildOnMismatch = onMismatch == "rebuild";
     options.templateFile = templatePath;

@@ -7,10 +7,13 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
+#include <iterator>
 #include <memory>
 
 #include <nlohmann/json.hpp>
 
+#include "core/corrections.h"
 #include "core/crossing.h"
 #include "core/mesh_info.h"
 #include "core/number_text.h"
@@ -23,8 +26,10 @@
 #include "io/contours/threemf_writer.h"
 #include "io/errors.h"
 #include "io/jobs/layer_report.h"
+#include "io/masks/mask_png.h"
 #include "io/masks/mask_sink.h"
 #include "io/output_file.h"
+#include "offset/polygon_offset.h"
 #include "parallel/parallel.h"
 #include "parallel/variant_screen.h"
 
@@ -120,30 +125,33 @@ double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& plan
   return planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
 }
 
-MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::string& name,
-                    const std::vector<double>& planes) {
+MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
+                    const std::string& name, const std::vector<double>& planes) {
   MaskJob job;
   job.name = name;
-  uint32_t width = 0, height = 0;
-  double pixel = 0;
-  if (!o.printer.empty()) {
-    const auto preset = findPrinter(o.printer);
-    if (!preset) throw InputError("unknown printer '" + o.printer + "' (known: " + printerNames() + ")");
-    width = preset->width;
-    height = preset->height;
-    pixel = preset->pixel;
-    job.printerModel = preset->model;
-  }
+  uint32_t width = print.pixelsX, height = print.pixelsY;
+  double pixel = print.pixelsX > 0 && print.displayWidth > 0 ? print.displayWidth / print.pixelsX : 0.0;
+  if (print.pixelsY > 0 && print.displayHeight > 0 && pixel > 0 &&
+      std::abs(print.displayHeight / print.pixelsY - pixel) > 1e-9 * pixel)
+    throw InputError("printer '" + print.printerName + "': display_width / display_pixels_x (" +
+                     formatNumber(pixel) + " mm) and display_height / display_pixels_y (" +
+                     formatNumber(print.displayHeight / print.pixelsY) +
+                     " mm) differ: toposlice's pixels are square");
+  job.printerModel = print.printerModel;
+  job.exposureTime = print.exposureTime;
+  job.initialExposureTime = print.initialExposureTime;
+  job.fadeLayers = print.fadedLayers;
   if (o.resolution) std::tie(width, height) = *o.resolution;
   if (o.pixel) pixel = *o.pixel;
   if (width == 0 || height == 0)
     throw InputError("masks need an image size: give --printer (" + printerNames() + ") or --resolution WxH");
   if (!(pixel > 0))
-    throw InputError(o.printer.empty() || o.pixel
+    throw InputError(print.printerName.empty() || o.pixel
                          ? "masks need a positive pixel size: give --pixel MM"
-                         : "printer '" + o.printer +
+                         : "printer '" + print.printerName +
                                "' has no fixed pixel size: give --pixel MM (the display's pixel pitch)");
-  job.grid = placeGrid(extent, width, height, pixel, o.origin, o.mirrorX, o.mirrorY);
+  job.grid = placeGrid(extent, width, height, pixel, o.origin, o.mirrorX || print.mirrorX,
+                       o.mirrorY || print.mirrorY);
   const double overhang = gridOverhang(extent, job.grid);
   if (overhang > 0 && !o.crop) {
     // Which edges the model crosses, and by how much, in the model's coordinates.
@@ -174,8 +182,27 @@ MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::
     throw InputError(text);
   }
   job.layerCount = static_cast<uint32_t>(planes.size());
-  job.antiAliased = o.antialias;
+  job.antiAliased = o.antialias || (print.gammaCorrection && *print.gammaCorrection > 0);
+  job.printerProfile = print.printerName;
+  job.materialName = print.materialName;
+  job.settings = settingValues(print);
   return job;
+}
+
+// The light-uniformity map: an 8-bit grayscale PNG as the display shows it (the masks' own layout and
+// mirroring), exactly the masks' size.
+MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path.string() + ": cannot read the light map (light_map)");
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  MaskImage map;
+  if (!decodeMaskPng(bytes, map))
+    throw InputError(path.string() + ": the light map must be an 8-bit (or less) grayscale PNG");
+  if (map.width != job.grid.width || map.height != job.grid.height)
+    throw InputError(path.string() + ": the light map is " + std::to_string(map.width) + "x" +
+                     std::to_string(map.height) + " pixels, the masks " + std::to_string(job.grid.width) +
+                     "x" + std::to_string(job.grid.height) + ": it must have the display's size");
+  return map;
 }
 
 }  // namespace
@@ -294,6 +321,13 @@ void validateSliceOptions(const SliceJobOptions& options) {
       throw InputError(path.string() + ": unknown contour output type '" + ext +
                        "' (use .cli, .svg or .3mf)");
   }
+  const PrintSettings& print = options.print;
+  if (print.gammaCorrection && *print.gammaCorrection == 0 && options.masks.antialias)
+    throw InputError("--antialias and gamma_correction 0 (binary masks) contradict each other: give one");
+  if (!print.lightMap.empty() && !options.masks.output.empty() && !options.masks.antialias &&
+      !(print.gammaCorrection && *print.gammaCorrection > 0))
+    throw InputError("light_map " + print.lightMap.string() +
+                     " multiplies anti-aliased masks: add --antialias (or gamma_correction > 0)");
   if (!options.report.empty() && lowerExtension(options.report) != ".csv")
     throw InputError(options.report.string() + ": the per-layer report is CSV: give a .csv file name");
   if (!options.summary.empty() && lowerExtension(options.summary) != ".json")
@@ -368,7 +402,20 @@ static void writeSliceSummary(const std::filesystem::path& model, const SliceJob
   for (const auto& f : options.add) features.push_back({{"role", "add"}, {"file", f.string()}});
   for (const auto& f : options.remove) features.push_back({{"role", "remove"}, {"file", f.string()}});
   j["features"] = features;
+  nlohmann::ordered_json settings = nlohmann::ordered_json::object();
+  for (const auto& [key, value] : settingValues(options.print))
+    if (!value.empty()) settings[key] = value;
+  nlohmann::ordered_json origins = nlohmann::ordered_json::object();
+  for (const auto& [key, origin] : options.print.origin) origins[key] = origin;
+  const auto scale = options.print.scale();
+  j["print_settings"] = {{"printer", options.print.printerName},
+                         {"material", options.print.materialName},
+                         {"values", settings},
+                         {"set_by", origins},
+                         {"scale_xyz", {scale[0], scale[1], scale[2]}},
+                         {"scale_centre", "bounding-box centre in x and y, lowest z"}};
   j["volume_ml"] = r.volumeMl;
+  j["resin_mass_g"] = r.volumeMl * options.print.materialDensity;
   j["volume_source"] =
       options.masks.output.empty() ? "contour area x layer thickness" : "lit mask area x layer thickness";
   j["model_volume_ml"] = std::abs(r.volume) / 1000.0;
@@ -424,7 +471,30 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (const auto& path : *list) features.push_back(readMesh(path, options.read));
   result.readSeconds = secondsSince(start);
   result.facets = soup.facetCount();
-  const SoupMeasures measures = measureSoup(soup.corners);
+  SoupMeasures measures = measureSoup(soup.corners);
+  const PrintSettings& print = options.print;
+  if (print.scales()) {
+    // The scaling correction, once, on the model and its features about the model's centre (bottom
+    // centre of its bounding box), so every output agrees and z scaling changes the layer count.
+    const std::array<double, 3> centre = scaleCentre(measures.bounds), factors = print.scale();
+    auto scaleAll = [&](std::vector<Point3f>& corners) {
+      constexpr std::size_t kBlock = 65536;
+      parallelForChunks((corners.size() + kBlock - 1) / kBlock, 1, [&](std::size_t b0, std::size_t b1) {
+        const std::size_t end = std::min(corners.size(), b1 * kBlock);
+        scaleCorners(std::span<Point3f>(corners).subspan(b0 * kBlock, end - b0 * kBlock), factors, centre);
+      });
+    };
+    scaleAll(soup.corners);
+    for (FacetSoup& f : features) scaleAll(f.corners);
+    measures = measureSoup(soup.corners);
+  }
+  if (print.maxPrintHeight > 0 &&
+      double{measures.bounds.max.z} - measures.bounds.min.z > print.maxPrintHeight)
+    throw InputError(model.string() + ": the model is " +
+                     formatNumber(double{measures.bounds.max.z} - measures.bounds.min.z) +
+                     " mm tall, more than the printer's max_print_height " +
+                     formatNumber(print.maxPrintHeight) + " mm" +
+                     (print.scales() ? " (after the scaling correction)" : ""));
   result.bounds = measures.bounds;
   result.volume = measures.volume;
   result.degenerateFacets = measures.degenerateFacets;
@@ -479,13 +549,18 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
       extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
     }
-    maskJob = makeMaskJob(options.masks, extent, job.name, planes);
+    maskJob = makeMaskJob(options.masks, print, extent, job.name, planes);
     maskJob.layerHeight = nominalLayerHeight(options.planes, planes);
     // Archive timestamps come from the model file, so the same input gives the same bytes.
     struct stat info {};
     if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
     maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
   }
+  // Light-uniformity map: a grayscale PNG of the display, the size of every mask.
+  MaskImage lightMap;
+  if (masks && !print.lightMap.empty()) lightMap = readLightMap(print.lightMap, maskJob);
+  const bool gamma = masks && maskJob.antiAliased && print.gammaCorrection && *print.gammaCorrection != 1.0;
+  const std::array<uint8_t, 256> gammaLut = gammaTable(gamma ? *print.gammaCorrection : 1.0);
   std::unique_ptr<LayerReport> report;
   if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
 
@@ -494,7 +569,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const std::size_t addCount = options.add.size();
 
   struct LayerResult {
-    EncodedMaskLayer encoded;  // the mask as the sink encoded it (a PNG, an EXR file, mask runs)
+    EncodedMaskLayer encoded;              // the mask as the sink encoded it (a PNG, an EXR file, mask runs)
+    std::vector<LayerContours> corrected;  // with corrections: the corrected layer, then empty features
     double area = 0;
     uint64_t islands = 0;
   };
@@ -514,11 +590,27 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   // Per-layer area and islands feed the masks (the archive's resin volume) and the report; a contour-only
   // run without a report prints no volume, so it skips that pass over every point.
   const bool measureLayers = masks || report || !options.summary.empty();
-  stages.process = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
+  const bool correcting = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+  stages.process = [&](uint32_t k, std::span<const LayerContours> sliced, std::size_t slot,
                        uint32_t position) {
-    if (!measureLayers) return;
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
+    std::span<const LayerContours> layer = sliced;
+    if (correcting) {
+      // Absolute correction and elephant foot on the layer's solid region (model, add-ons and removals
+      // under the positive rule): every output below and in consume sees the corrected layer.
+      const LayerCorrection correction{
+          print.absoluteCorrection, elephantFootAt(k, print.elefantFootCompensation, print.elefantFootLayers),
+          print.elefantFootMinWidth};
+      r.corrected.resize(sliced.size());
+      s.sets.clear();
+      for (std::size_t i = 0; i < sliced.size(); ++i)
+        s.sets.push_back({&sliced[i], i == 0 || i <= addCount ? 1 : -1});
+      correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
+      for (std::size_t i = 1; i < sliced.size(); ++i) r.corrected[i].clear(sliced[i].z);
+      layer = r.corrected;
+    }
+    if (!measureLayers) return;
     r.islands = 0;
     double modelArea = 0;
     for (std::size_t l = 0; l < layer[0].loopCount(); ++l) {
@@ -537,7 +629,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
     if (maskJob.antiAliased) {
       rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
-      r.area = maskArea(s.mask, maskJob.grid.pixel);
+      if (gamma) applyTable(s.mask, gammaLut);
+      r.area = maskArea(s.mask, maskJob.grid.pixel);  // the light map dims the light, not the part
+      if (!lightMap.pixels.empty()) applyLightMap(s.mask, lightMap);
     } else {
       uint64_t lit = 0;
       rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster, &lit);
@@ -548,6 +642,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
                        uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
+    if (correcting) layer = r.corrected;
     for (auto& sink : sinks) sink->writeLayer(k, layer);
     if (maskSink) maskSink->writeEncodedLayer(k, planes[k], r.encoded);
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);

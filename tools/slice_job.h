@@ -15,6 +15,7 @@
 #include "core/mesh.h"
 #include "core/planes.h"
 #include "core/progress.h"
+#include "io/jobs/profile.h"
 #include "io/jobs/template_file.h"
 #include "io/readers/mesh_reader.h"
 #include "parallel/band_slicer.h"
@@ -46,6 +47,9 @@ struct SliceJobOptions {
   bool rebuildOnMismatch = false;                // a variant that does not match: rebuild instead of failing
   bool fixOrientation = false;                   // flip every facet of an inside-out (negative volume) mesh
   MaskOptions masks;
+  // Printer and material settings (io/jobs/profile.h), resolved: exposure for the printer files, the
+  // corrections applied to the geometry, gamma and light map applied to the masks.
+  PrintSettings print;
   std::vector<std::filesystem::path> add, remove;  // add-on and removal features (inter-model reuse)
   std::filesystem::path report;                    // per-layer CSV report; empty: none
   std::filesystem::path summary;                   // machine-readable summary (JSON); empty: none
@@ -61,7 +65,7 @@ struct SliceJobResult {
   std::string topology;           // how the adjacency was obtained, for the summary
   EdgeStats edges;                // when built here
   uint64_t degenerateFacets = 0;  // skipped
-  double volume = 0;              // signed, before any fix
+  double volume = 0;              // signed, before any fix (after the scaling correction)
   bool inverted = false, flipped = false;
   double readSeconds = 0, topologySeconds = 0, sliceSeconds = 0;
   SliceStats stats;

@@ -13,7 +13,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/number_text.h"
 #include "io/errors.h"
+#include "io/jobs/profile.h"
 
 namespace toposlice {
 namespace {
@@ -283,8 +285,9 @@ class JobParser {
     if (v == nullptr) fail(at, "missing (required: the slicing planes, layer_height, layers or z)");
     object(*v, at);
     checkKeys(*v, at,
-              {"layer_height", "layers", "z0", "z", "method", "join_tolerance", "printer", "pixel", "origin",
-               "resolution", "mirror", "antialias", "cli_binary", "threads", "overwrite", "units", "scale"});
+              {"layer_height", "layers", "z0",         "z",       "method",    "join_tolerance", "printer",
+               "pixel",        "origin", "resolution", "mirror",  "antialias", "cli_binary",     "threads",
+               "overwrite",    "units",  "scale",      "profile", "material",  "print_settings"});
     const auto key = [&](std::string_view k) { return childPath(at, k); };
     if (const Json* x = find(*v, "layer_height")) job_.layerHeight = positive(*x, key("layer_height"));
     if (const Json* x = find(*v, "layers")) {
@@ -357,6 +360,35 @@ class JobParser {
       job_.unitMm = found->second;
     }
     if (const Json* x = find(*v, "scale")) job_.scale = positive(*x, key("scale"));
+    if (const Json* x = find(*v, "profile")) job_.profile = input(*x, key("profile"));
+    if (const Json* x = find(*v, "material")) job_.material = string(*x, key("material"));
+    if (const Json* x = find(*v, "print_settings")) {
+      object(*x, key("print_settings"));
+      PrintSettings check;  // every key and value checked now, not after hours of slicing
+      for (const auto& [k, value] : x->items()) {
+        const std::string where = childPath(key("print_settings"), k);
+        std::string text;
+        if (value.is_string())
+          text = value.get<std::string>();
+        else if (value.is_boolean())
+          text = value.get<bool>() ? "1" : "0";
+        else if (value.is_number_float())
+          text = formatNumber(value.get<double>());
+        else if (value.is_number())
+          text = value.dump();
+        else
+          wrongType(value, where, "a number, a string or true/false");
+        if (k == "light_map" && !text.empty()) text = input(value, where).string();
+        try {
+          assignSetting(check, k, text, "print_settings");
+        } catch (const InputError& e) {
+          std::string what = e.what();
+          if (what.starts_with("print_settings: ")) what = what.substr(16);
+          fail(where, what);
+        }
+        job_.printSettings.emplace_back(k, text);
+      }
+    }
   }
 
   std::vector<fs::path> inputList(const Json& v, const std::string& at) {

@@ -17,6 +17,7 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace toposlice {
@@ -48,9 +49,14 @@ struct BatchJob {
   std::optional<std::array<uint32_t, 2>> resolution;  // width, height in pixels
   std::optional<bool> mirrorX, mirrorY;               // set together by "mirror"; unset: the printer's
   bool antialias = false;                             // anti-aliased masks (else binary)
-  bool cliBinary = false;                             // .cli contours in binary CLI (else ASCII)
-  uint32_t threads = 0;                               // 0: all cores
-  bool overwrite = false;                             // replace existing outputs
+  // Printer and material settings (io/jobs/profile.h): a profile file, a material preset or profile,
+  // and per-key overrides ("print_settings": {"exposure_time": 6, ...}), checked when parsed.
+  std::filesystem::path profile;
+  std::string material;
+  std::vector<std::pair<std::string, std::string>> printSettings;
+  bool cliBinary = false;              // .cli contours in binary CLI (else ASCII)
+  uint32_t threads = 0;                // 0: all cores
+  bool overwrite = false;              // replace existing outputs
   std::optional<double> unitMm;        // "units": mm per file unit of the meshes (mm, cm, m, in)
   double scale = 1.0;                  // "scale": multiplies every coordinate after units
   std::vector<BatchVariant> variants;  // at least one

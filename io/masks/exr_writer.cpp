@@ -169,12 +169,13 @@ int64_t writeToMemory(exr_const_context_t, void* userdata, const void* buffer, u
   return static_cast<int64_t>(size);
 }
 
-void keepError(exr_const_context_t ctxt, exr_result_t, const char* message) {
-  void* userdata = nullptr;
-  if (exr_get_user_data(ctxt, &userdata) == EXR_ERR_SUCCESS && userdata != nullptr) {
-    std::string& error = static_cast<MemoryStream*>(userdata)->error;
-    if (error.empty()) error = message;
-  }
+// The stream of the layer being encoded on this thread. OpenEXR calls the error handler while it holds
+// the context's lock, so the handler must not call back into the context (exr_get_user_data would wait
+// for that lock forever): it finds the stream here instead.
+thread_local MemoryStream* tEncodingStream = nullptr;
+
+void keepError(exr_const_context_t, exr_result_t, const char* message) {
+  if (tEncodingStream != nullptr && tEncodingStream->error.empty()) tEncodingStream->error = message;
 }
 
 class ExrSink final : public LayerFolderSink {
@@ -210,6 +211,10 @@ void encodeExrMaskLayer(const MaskImage& mask, const MaskJob& job, uint32_t inde
   assert(width >= 1 && height >= 1 && mask.pixels.size() == size_t{width} * height);
   out.clear();
   MemoryStream stream{&out, {}};
+  tEncodingStream = &stream;
+  struct Reset {
+    ~Reset() { tEncodingStream = nullptr; }
+  } reset;
   exr_context_initializer_t init = EXR_DEFAULT_CONTEXT_INITIALIZER;
   init.user_data = &stream;
   init.write_fn = &writeToMemory;
@@ -239,6 +244,10 @@ void encodeExrMaskLayer(const MaskImage& mask, const MaskJob& job, uint32_t inde
   step([&] { return exr_attr_set_v2f(ctxt, part, "origin", &origin); });
   step([&] { return exr_attr_set_int(ctxt, part, "mirrorX", job.grid.mirrorX ? 1 : 0); });
   step([&] { return exr_attr_set_int(ctxt, part, "mirrorY", job.grid.mirrorY ? 1 : 0); });
+  for (const auto& [key, value] : job.settings) {  // the printer and material settings (mask_sink.h)
+    const std::string attribute = "ts:" + key;  // EXR attribute names have at most 31 bytes
+    step([&] { return exr_attr_set_string(ctxt, part, attribute.c_str(), value.c_str()); });
+  }
   step([&] { return exr_write_header(ctxt); });
   // All chunks are tokenized first, so that they share one Huffman code, planned once per layer.
   const bool copies = width >= 4 && width <= kDeflateMaxDistance;

@@ -20,6 +20,7 @@
 #include <filesystem>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/mask_image.h"
@@ -44,6 +45,11 @@ struct MaskJob {
   double exposureTime = 8.0;          // s
   double initialExposureTime = 35.0;  // s, first layer; faded linearly to exposureTime
   uint32_t fadeLayers = 10;           // layers of that fade, at least 2 for the SL1 firmware
+  // The job's printer and material (io/jobs/profile.h): names (SL1 config.ini printerProfile and
+  // materialName; empty: "toposlice") and every setting as PrusaSlicer key = value text, written into
+  // prusaslicer.ini (PrusaSlicer's keys) and as metadata "toposlice:<key>" into EXR and VDB files.
+  std::string printerProfile, materialName;
+  std::vector<std::pair<std::string, std::string>> settings;
 };
 
 // One layer as encodeLayer leaves it for writeEncodedLayer.

@@ -253,14 +253,14 @@ std::string sl1ConfigIni(const MaskJob& job, uint32_t layers, std::time_t create
   m["hollow"] = "0";
   m["layerHeight"] = number(job.layerHeight);
   m["layerHeightFirst"] = number(job.layerHeight);
-  m["materialName"] = "toposlice";
+  m["materialName"] = job.materialName.empty() ? "toposlice" : job.materialName;
   m["numFade"] = number(uint64_t{fadeLayersOf(job)});
   m["numFast"] = number(uint64_t{layers});
   m["numSlow"] = "0";
   m["printProfile"] = "toposlice";
   m["printTime"] = number(std::round(estimatedPrintTime(job, layers)));
   m["printerModel"] = modelOf(job);
-  m["printerProfile"] = "toposlice";
+  m["printerProfile"] = job.printerProfile.empty() ? "toposlice" : job.printerProfile;
   m["printerVariant"] = "default";
   m["prusaSlicerVersion"] = "toposlice";
   m["usedMaterial"] = number(std::round(job.volumeMl * 1000) / 1000);
@@ -304,6 +304,15 @@ std::string sl1PrusaSlicerIni(const MaskJob& job, uint32_t layers) {
   m["sla_material_settings_id"] = "toposlice";
   m["sla_print_settings_id"] = "toposlice";
   m["supports_enable"] = "0";
+  // The printer's and material's settings as chosen (exposure, corrections, density), by PrusaSlicer's
+  // keys; the display keys and the print height above stay as the images were written, and toposlice's
+  // own keys (light_map, elefant_foot_layers) stay out.
+  for (const auto& [key, value] : job.settings)
+    if (!key.starts_with("display_") && key != "printer_model" && key != "max_print_height" &&
+        key != "light_map" && key != "elefant_foot_layers" && !value.empty())
+      m[key] = value;
+  if (!job.printerProfile.empty()) m["printer_settings_id"] = job.printerProfile;
+  if (!job.materialName.empty()) m["sla_material_settings_id"] = job.materialName;
   return toIni(m);
 }
 

@@ -111,6 +111,8 @@ class VdbSink final : public MaskSink {
     fileMeta.insertMeta("layer_height", openvdb::DoubleMetadata(job.layerHeight));
     fileMeta.insertMeta("pixel_size", openvdb::DoubleMetadata(job.grid.pixel));
     fileMeta.insertMeta("slab_layers", openvdb::Int32Metadata(static_cast<int32_t>(kVdbSlabLayers)));
+    for (const auto& [key, value] : job.settings)  // the printer and material settings (mask_sink.h)
+      fileMeta.insertMeta("toposlice:" + key, openvdb::StringMetadata(value));
     try {
       archive_.emplace(file_.tempPath(), fileMeta);  // writes through its own handle; file_ renames it
     } catch (const std::exception& e) {

@@ -1,0 +1,52 @@
+// Exact polygon offsets of one layer's solid region (issue "Production print settings": absolute XY
+// correction and elephant-foot compensation), through Clipper 6 (Debian's libpolyclipping, the library
+// PrusaSlicer uses for the same corrections).
+//
+// Contract, settled once:
+// - The input region is the one the rasterizer lights (core/rasterize.h): every closed loop of every set
+//   adds its winding number times the set's sign; solid where the count is > 0 (the paper's positive
+//   rule). Open polylines and loops with a non-finite coordinate take no part. Loops that touch, overlap
+//   or self-intersect are therefore fine: the region is first rebuilt as clean polygons (a union under
+//   the positive rule), so an offset never sees a self-intersecting input.
+// - Coordinates are rounded to integer nanometres (kOffsetUnitsPerMm) for Clipper; the result has no
+//   self-intersections, outer loops counter-clockwise (positive area), holes clockwise, no two loops
+//   overlapping. Parts that an inward offset removes (walls thinner than twice the distance) vanish.
+// - Before an offset, vertices closer than 0.5 um to their neighbours or to the line through them are
+//   dropped (ClipperLib::CleanPolygons): the outline moves by at most 0.5 um, far below a pixel, and the
+//   offset of a dense mesh's outline costs about a third less.
+// - Corners use mitred joins with a miter limit of 3 (PrusaSlicer's default for offset_ex): a box grown
+//   by d stays a box, (a + 2d) x (b + 2d); corners sharper than about 39 degrees are squared off.
+// - The output layer holds closed loops only; its `facets` entries are kCorrectedFacet (a corrected
+//   point lies on no single facet).
+#pragma once
+
+#include <cstdint>
+#include <span>
+
+#include "core/contours.h"
+#include "core/rasterize.h"
+
+namespace toposlice {
+
+inline constexpr double kOffsetUnitsPerMm = 1e6;
+inline constexpr uint32_t kCorrectedFacet = 0xffffffffu;
+
+struct LayerCorrection {
+  double absolute = 0;      // mm: every solid grown (+) or shrunk (-) by this distance
+  double elephantFoot = 0;  // mm >= 0: shrink applied after `absolute`, sparing thin features
+  double minWidth = 0;      // mm >= 0: features narrower than this are not shrunk by elephantFoot
+  bool any() const { return absolute != 0 || elephantFoot > 0; }
+};
+
+// The sets' solid region, corrected, into `out` (cleared first; out.z = z). Steps, in order:
+// 1. S = the region of `sets` under the positive rule, grown by `absolute` (shrunk when negative).
+// 2. With elephantFoot e > 0 and r = minWidth / 2: the thin part T = S minus its opening by r (the
+//    points of S that no disc of diameter minWidth inside S covers), cleaned of slivers thinner than a
+//    micrometre. The result is (S shrunk by e) united with ((T grown by e) within S): everything at least
+//    minWidth wide is shrunk by e; thinner features keep their full width, and stay joined to the shrunk
+//    body by their root (the part of T's e-neighbourhood inside S).
+// Returns the number of closed loops written.
+std::size_t correctLayer(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
+                         LayerContours& out);
+
+}  // namespace toposlice

@@ -1,0 +1,315 @@
+// Corrections (offset/polygon_offset.h, core/corrections.h) against analytic areas, and through the
+// program: every correction alone and combined on a box with thin pins and on a cylinder.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <numbers>
+#include <sstream>
+
+#include "core/corrections.h"
+#include "core/mesh_info.h"
+#include "core/rasterize.h"
+#include "io/readers/stl_writer.h"
+#include "offset/polygon_offset.h"
+#include "tests/fixtures/shapes.h"
+#include "tests/tool_runner.h"
+
+namespace toposlice {
+namespace {
+
+using tool_test::CliToolBase;
+using tool_test::examplePart;
+using tool_test::readBytes;
+using tool_test::RunResult;
+namespace fs = std::filesystem;
+
+void addLoop(LayerContours& layer, std::vector<Point2d> points) {
+  for (const Point2d& p : points) layer.addPoint(p, 0);
+  layer.endLoop(true);
+}
+
+void addRect(LayerContours& layer, double x0, double y0, double x1, double y1) {
+  addLoop(layer, {{x0, y0}, {x1, y0}, {x1, y1}, {x0, y1}});
+}
+
+// Regular n-gon of circumradius r about (cx, cy), counter-clockwise.
+void addPolygon(LayerContours& layer, double cx, double cy, double r, int n) {
+  std::vector<Point2d> points;
+  for (int i = 0; i < n; ++i) {
+    const double a = 2 * std::numbers::pi * i / n;
+    points.push_back({cx + r * std::cos(a), cy + r * std::sin(a)});
+  }
+  addLoop(layer, points);
+}
+
+double correctedArea(const LayerContours& layer, const LayerCorrection& c, int sign = 1) {
+  const ContourSet set{&layer, sign};
+  LayerContours out;
+  correctLayer({&set, 1}, c, 0.0, out);
+  return layerSignedArea(out);
+}
+
+TEST(PolygonOffset, BoxGrowsAndShrinksByTheDistance) {
+  LayerContours box;
+  addRect(box, 0, 0, 10, 6);
+  EXPECT_NEAR(correctedArea(box, {0.05, 0, 0}), 10.1 * 6.1, 1e-5);
+  EXPECT_NEAR(correctedArea(box, {-0.05, 0, 0}), 9.9 * 5.9, 1e-5);
+  EXPECT_NEAR(correctedArea(box, {0, 0, 0}), 60.0, 1e-6);
+}
+
+TEST(PolygonOffset, PolygonalCylinderKeepsItsShape) {
+  // A regular n-gon offset by d with mitred corners is the n-gon with apothem a + d: area n (a+d)^2
+  // tan(pi/n).
+  const int n = 360;
+  const double r = 3, apothem = r * std::cos(std::numbers::pi / n);
+  LayerContours disc;
+  addPolygon(disc, 1, 2, r, n);
+  for (const double d : {0.05, -0.05, 0.2}) {
+    const double expected = n * (apothem + d) * (apothem + d) * std::tan(std::numbers::pi / n);
+    // Outline cleaning before the offset moves the outline by at most 0.5 um (polygon_offset.h): here
+    // it drops every other vertex of the 360-gon (its sagitta over two edges is 0.46 um).
+    EXPECT_NEAR(correctedArea(disc, {d, 0, 0}), expected, 2 * std::numbers::pi * (r + d) * 0.0005) << d;
+  }
+}
+
+TEST(PolygonOffset, OverlappingAndRemovedLoopsFollowThePositiveRule) {
+  // The same square twice (count 2) shrinks as one square.
+  LayerContours twice;
+  addRect(twice, 0, 0, 4, 4);
+  addRect(twice, 0, 0, 4, 4);
+  EXPECT_NEAR(correctedArea(twice, {-0.1, 0, 0}), 3.8 * 3.8, 1e-5);
+  // Two overlapping squares shrink as their union (an L-shaped outline grows no inner edge).
+  LayerContours overlap;
+  addRect(overlap, 0, 0, 4, 4);
+  addRect(overlap, 2, 0, 6, 4);
+  EXPECT_NEAR(correctedArea(overlap, {-0.1, 0, 0}), 5.8 * 3.8, 1e-5);
+  // A removal set (sign -1) punches a hole, which grows when the solid shrinks.
+  LayerContours model, removal;
+  addRect(model, 0, 0, 10, 10);
+  addRect(removal, 4, 4, 6, 6);
+  const ContourSet sets[] = {{&model, 1}, {&removal, -1}};
+  LayerContours out;
+  correctLayer(sets, {-0.1, 0, 0}, 0.0, out);
+  EXPECT_NEAR(layerSignedArea(out), 9.8 * 9.8 - 2.2 * 2.2, 1e-5);
+  EXPECT_EQ(out.loopCount(), 2u);
+}
+
+TEST(PolygonOffset, SelfIntersectingAndVanishingLoops) {
+  // A bow tie: its clockwise half has winding -1 and is not solid; the solid triangle grows alone.
+  LayerContours bow;
+  addLoop(bow, {{0, 0}, {2, 2}, {2, 0}, {0, 2}});  // left triangle CW, right triangle CCW
+  const double triangle = correctedArea(bow, {0, 0, 0});
+  EXPECT_NEAR(triangle, 1.0, 1e-6);
+  // A wall thinner than twice the deflation vanishes; a wider one stays.
+  LayerContours wall;
+  addRect(wall, 0, 0, 0.08, 5);
+  EXPECT_EQ(correctedArea(wall, {-0.05, 0, 0}), 0.0);
+  addRect(wall, 1, 0, 1.3, 5);
+  EXPECT_NEAR(correctedArea(wall, {-0.05, 0, 0}), 0.2 * 4.9, 1e-5);
+  // Two squares that touch at an edge grow as one rectangle.
+  LayerContours touching;
+  addRect(touching, 0, 0, 1, 1);
+  addRect(touching, 1, 0, 2, 1);
+  EXPECT_NEAR(correctedArea(touching, {0.1, 0, 0}), 2.2 * 1.2, 1e-5);
+}
+
+TEST(ElephantFoot, ThinPinsSurviveAndTheBodyShrinks) {
+  // A 10 x 10 box with two pins 0.1 mm wide and 1 mm long on its right side.
+  LayerContours part;
+  addLoop(part, {{0, 0},
+                 {10, 0},
+                 {10, 2.95},
+                 {11, 2.95},
+                 {11, 3.05},
+                 {10, 3.05},
+                 {10, 6.95},
+                 {11, 6.95},
+                 {11, 7.05},
+                 {10, 7.05},
+                 {10, 10},
+                 {0, 10}});
+  const double e = 0.2, width = 0.2;
+  const ContourSet set{&part, 1};
+  LayerContours out;
+  correctLayer({&set, 1}, {0, e, width}, 0.0, out);
+  // Body shrunk by e; each pin kept whole with its root: the pin's e-neighbourhood inside the body,
+  // (0.1 + 2e) x e.
+  const double expected = (10 - 2 * e) * (10 - 2 * e) + 2 * (0.1 * 1.0 + (0.1 + 2 * e) * e);
+  EXPECT_NEAR(layerSignedArea(out), expected, 1e-5);
+  EXPECT_EQ(out.loopCount(), 1u);  // the pins stay joined to the body
+  // The pin tips are lit on a 10 um grid.
+  PixelGrid grid{-0.5, -0.5, 0.01, 1200, 1200};
+  MaskImage mask;
+  RasterScratch scratch;
+  const ContourSet corrected{&out, 1};
+  rasterizeBinary({&corrected, 1}, grid, mask, scratch);
+  const auto lit = [&](double x, double y) {
+    const auto i = static_cast<uint32_t>((x - grid.x0) / grid.pixel),
+               j = static_cast<uint32_t>((y - grid.y0) / grid.pixel);
+    return mask.pixels[j * grid.width + i] != 0;
+  };
+  EXPECT_TRUE(lit(10.955, 3.005));
+  EXPECT_TRUE(lit(10.955, 7.005));
+  EXPECT_FALSE(lit(9.905, 5.005));  // the body's edge moved in by e
+  // Without a minimum width the pins go with the rest.
+  correctLayer({&set, 1}, {0, e, 0}, 0.0, out);
+  EXPECT_NEAR(layerSignedArea(out), (10 - 2 * e) * (10 - 2 * e), 1e-5);
+}
+
+TEST(ElephantFoot, FadesLinearlyOverItsLayers) {
+  EXPECT_DOUBLE_EQ(elephantFootAt(0, 0.2, 1), 0.2);
+  EXPECT_DOUBLE_EQ(elephantFootAt(1, 0.2, 1), 0.0);
+  EXPECT_DOUBLE_EQ(elephantFootAt(0, 0.2, 4), 0.2);
+  EXPECT_DOUBLE_EQ(elephantFootAt(1, 0.2, 4), 0.15);
+  EXPECT_DOUBLE_EQ(elephantFootAt(3, 0.2, 4), 0.05);
+  EXPECT_DOUBLE_EQ(elephantFootAt(4, 0.2, 4), 0.0);
+}
+
+TEST(MaskCorrections, GammaAndLightMap) {
+  const auto identity = gammaTable(1.0);
+  for (int v = 0; v < 256; ++v) EXPECT_EQ(identity[static_cast<std::size_t>(v)], v);
+  const auto g = gammaTable(2.0);
+  EXPECT_EQ(g[0], 0);
+  EXPECT_EQ(g[255], 255);
+  EXPECT_EQ(g[128], 64);  // 255 * (128/255)^2 = 64.25
+  MaskImage mask{2, 1, {255, 128}, {}, {}};
+  MaskImage map{2, 1, {128, 255}, {}, {}};
+  applyLightMap(mask, map);
+  EXPECT_EQ(mask.pixels[0], 128);
+  EXPECT_EQ(mask.pixels[1], 128);
+}
+
+TEST(ScaleCorrection, AboutTheBottomCentre) {
+  FacetSoup soup = fixtures::box(0, 0, 1, 10, 4, 3);
+  const BoundingBox before = boundsOf(soup.corners);
+  scaleCorners(soup.corners, {1.02, 0.5, 2.0}, scaleCentre(before));
+  const BoundingBox after = boundsOf(soup.corners);
+  EXPECT_NEAR(after.min.x, -0.1, 1e-6);
+  EXPECT_NEAR(after.max.x, 10.1, 1e-6);
+  EXPECT_NEAR(after.min.y, 1, 1e-6);
+  EXPECT_NEAR(after.max.y, 3, 1e-6);
+  EXPECT_NEAR(after.min.z, 1, 1e-6);
+  EXPECT_NEAR(after.max.z, 5, 1e-6);
+}
+
+// Through the program: the per-layer report's areas (lit pixels x pixel^2) against the analytic area
+// of each corrected layer, within one pixel row along the outline (perimeter x pixel).
+class CorrectionsCli : public CliToolBase {
+ protected:
+  std::vector<double> reportAreas(const fs::path& csv) {
+    std::ifstream in(csv);
+    std::string line;
+    std::getline(in, line);
+    std::vector<double> areas;
+    while (std::getline(in, line)) {
+      std::stringstream s(line);
+      std::string field;
+      for (int i = 0; i < 3; ++i) std::getline(s, field, ',');
+      areas.push_back(std::stod(field));
+    }
+    return areas;
+  }
+};
+
+TEST_F(CorrectionsCli, CylinderEachCorrectionAloneAndCombined) {
+  const double r = 4, h = 2, layer = 0.1, pixel = 0.01;
+  writeBinaryStl(path("cyl.stl"), fixtures::cylinder(0, 0, r, 720, 0, static_cast<float>(h)), "cylinder",
+                 true);
+  struct Case {
+    std::vector<std::string> args;
+    double sx, sy, sz, absolute, foot;
+  };
+  const std::vector<Case> cases = {
+      {{}, 1, 1, 1, 0, 0},
+      {{"--absolute-correction", "0.05"}, 1, 1, 1, 0.05, 0},
+      {{"--absolute-correction", "-0.05"}, 1, 1, 1, -0.05, 0},
+      {{"--relative-correction-x", "1.02", "--relative-correction-y", "1.02"}, 1.02, 1.02, 1, 0, 0},
+      {{"--relative-correction-z", "1.5"}, 1, 1, 1.5, 0, 0},
+      {{"--material-correction-z", "0.5", "--relative-correction-z", "1.2"}, 1, 1, 0.6, 0, 0},
+      {{"--elefant-foot-compensation", "0.2"}, 1, 1, 1, 0, 0.2},
+      {{"--relative-correction-x", "1.02", "--relative-correction-y", "1.02", "--absolute-correction", "0.05",
+        "--elefant-foot-compensation", "0.2", "--material-correction-z", "1.1"},
+       1.02,
+       1.02,
+       1.1,
+       0.05,
+       0.2},
+  };
+  for (const Case& c : cases) {
+    std::vector<std::string> args{"slice",        path("cyl.stl").string(),
+                                  "-H",           "0.1",
+                                  "--resolution", "1000x1000",
+                                  "--pixel",      "0.01",
+                                  "--masks",      path("m").string(),
+                                  "--report",     path("r.csv").string(),
+                                  "-f",           "-q"};
+    args.insert(args.end(), c.args.begin(), c.args.end());
+    const RunResult run = this->run(args);
+    ASSERT_EQ(run.code(), 0) << run.describe();
+    const std::vector<double> areas = reportAreas(path("r.csv"));
+    // z scaling changes the layer count: ceil(height / layer) of the scaled (float) model height; a
+    // plane above the top (the float height a hair over 1.2) is empty.
+    const double top = static_cast<float>(h * c.sz);
+    EXPECT_EQ(areas.size(), static_cast<std::size_t>(std::ceil(top / layer))) << c.args.size();
+    for (std::size_t k = 0; k < areas.size() && (static_cast<double>(k) + 0.5) * layer < top; ++k) {
+      // The 720-gon scaled by (sx, sy) is an ellipse to within 1e-4 of its area; the offset adds
+      // perimeter x d (+ pi d^2 for a disc).
+      const double a = r * c.sx, b = r * c.sy;
+      double d = c.absolute - (k == 0 ? c.foot : 0);
+      const double perimeter = std::numbers::pi * (3 * (a + b) - std::sqrt((3 * a + b) * (a + 3 * b)));
+      const double expected = std::numbers::pi * a * b + perimeter * d + std::numbers::pi * d * d;
+      EXPECT_NEAR(areas[k], expected, perimeter * pixel + 0.01)
+          << "layer " << k << " of case " << c.args.size();
+    }
+  }
+}
+
+TEST_F(CorrectionsCli, ProfileFileSettingsReachTheSl1) {
+  {
+    std::ofstream profile(path("lab.json"));
+    profile << R"({"printers": {"lab-sl1": {"inherits": "sl1", "absolute_correction": -0.02,
+                    "relative_correction_x": 1.01}},
+                  "materials": {"dental": {"exposure_time": 6.5, "initial_exposure_time": 30,
+                    "faded_layers": 8, "material_density": 1.2, "material_correction_z": 1.002}}})";
+  }
+  const RunResult run = this->run({"slice", examplePart().string(), "-H", "0.05", "--profile",
+                                   path("lab.json").string(), "--masks", path("a.sl1").string(),
+                                   "--exposure-time", "7", "--summary", path("s.json").string(), "-q"});
+  ASSERT_EQ(run.code(), 0) << run.describe();
+  const std::string zip = readBytes(path("a.sl1"));
+  (void)zip;
+  const RunResult ini = this->run({"slice", examplePart().string(), "--profile", path("lab.json").string(),
+                                   "--masks", path("b.sl1").string(), "--explain"});
+  ASSERT_EQ(ini.code(), 0) << ini.describe();
+  EXPECT_NE(ini.out.find("exposure_time              = 6.5"), std::string::npos) << ini.out;
+  EXPECT_NE(ini.out.find("absolute_correction        = -0.02        (profile lab.json printer lab-sl1)"),
+            std::string::npos)
+      << ini.out;
+  EXPECT_FALSE(fs::exists(path("b.sl1")));  // --explain writes nothing
+  const std::string summary = readBytes(path("s.json"));
+  EXPECT_NE(summary.find("\"exposure_time\": \"7\""), std::string::npos) << summary;
+  EXPECT_NE(summary.find("\"material\": \"dental\""), std::string::npos) << summary;
+  EXPECT_NE(summary.find("\"resin_mass_g\""), std::string::npos) << summary;
+}
+
+TEST_F(CorrectionsCli, BadSettingsAreNamed) {
+  const RunResult typo = this->run(
+      {"slice", examplePart().string(), "-o", path("a.cli").string(), "--set", "absolute_corection=0.1"});
+  expectOneErrorLine(typo);
+  EXPECT_NE(typo.err.find("did you mean 'absolute_correction'"), std::string::npos) << typo.err;
+  const RunResult range = this->run(
+      {"slice", examplePart().string(), "-o", path("a.cli").string(), "--relative-correction-x", "-1"});
+  expectOneErrorLine(range);
+  const RunResult masksOnly =
+      this->run({"slice", examplePart().string(), "-o", path("a.cli").string(), "--exposure-time", "5"});
+  expectOneErrorLine(masksOnly);
+  EXPECT_NE(masksOnly.err.find("does nothing"), std::string::npos) << masksOnly.err;
+  const RunResult material =
+      this->run({"slice", examplePart().string(), "-o", path("a.cli").string(), "--material", "nope"});
+  expectOneErrorLine(material);
+  EXPECT_NE(material.err.find("unknown material 'nope' (known: default)"), std::string::npos) << material.err;
+}
+
+}  // namespace
+}  // namespace toposlice
