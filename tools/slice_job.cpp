@@ -127,6 +127,7 @@ MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::
                     const std::vector<double>& planes) {
   MaskJob job;
   job.name = name;
+  job.vdbSlabs = o.vdbSlabs;
   uint32_t width = 0, height = 0;
   double pixel = 0;
   if (!o.printer.empty()) {
@@ -513,6 +514,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   std::vector<SlotState> slots(plan.slots);
   for (SlotState& s : slots) s.layers.resize(plan.bandLayers);
   const bool png = maskSink && maskSink->wantsPng();
+  const bool sinkEncodes = maskSink && !png && maskSink->encodesLayers();
   MaskImage decoded;
   decoded.width = maskJob.grid.width;
   decoded.height = maskJob.grid.height;
@@ -553,6 +555,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (png) {
       encodeMaskPng(s.mask, r.payload, s.pngScratch);
       r.crc = static_cast<uint32_t>(crc32_z(0, r.payload.data(), r.payload.size()));
+    } else if (sinkEncodes) {
+      maskSink->encodeLayer(s.mask, r.payload);  // thread-safe: reads the mask and the sink's job
     } else {
       encodeMaskRuns(s.mask, r.payload);
     }
@@ -564,6 +568,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (maskSink) {
       if (png) {
         maskSink->writePngLayer(k, planes[k], decoded, r.payload, r.crc);
+      } else if (sinkEncodes) {
+        maskSink->writeEncodedLayer(k, planes[k], r.payload);
       } else {
         decodeMaskRuns(r.payload, decoded);
         maskSink->writeLayer(k, planes[k], decoded, {});

@@ -2,8 +2,9 @@
 //
 // Contract shared by every sink:
 // - Layers arrive in order, index 0, 1, 2, ... (one thread at a time; a sink is not thread-safe), each
-//   a MaskImage of exactly job.grid.width x job.grid.height. Memory never grows with the layer count:
-//   a sink keeps at most one slab of layers (VDB) plus per-file bookkeeping.
+//   a MaskImage of exactly job.grid.width x job.grid.height. Memory never grows with the layer count,
+//   except for the VDB sink's default single grid, whose tree stays in memory until finish() (OpenVDB
+//   writes a grid at once; its slab layout keeps one slab); the others keep per-file bookkeeping.
 // - PNG-based sinks (wantsPng() == true) take the layer as pre-encoded PNG bytes (encodeMaskPng), so
 //   the caller can encode in parallel; they encode `mask` themselves when `png` is empty. Other sinks
 //   read `mask` and ignore `png`.
@@ -19,6 +20,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "core/mask_image.h"
 #include "io/staged_directory.h"
@@ -41,6 +43,9 @@ struct MaskJob {
   double exposureTime = 8.0;          // s
   double initialExposureTime = 35.0;  // s, first layer; faded linearly to exposureTime
   uint32_t fadeLayers = 10;           // layers of that fade, at least 2 for the SL1 firmware
+  // VDB only: one grid per slab of kVdbSlabLayers layers (io/masks/vdb_writer.h) instead of one grid for
+  // the whole stack; ignored by the other formats.
+  bool vdbSlabs = false;
 };
 
 class MaskSink {
@@ -57,6 +62,18 @@ class MaskSink {
                              uint32_t pngCrc32) {
     (void)pngCrc32;
     writeLayer(index, z, mask, png);
+  }
+  // Sinks that prepare layers in the caller's parallel stage (encodesLayers() == true): the caller runs
+  // encodeLayer there, on any thread and concurrently (it reads only `mask` and the sink's job, and
+  // writes only `out`), and passes the bytes, in layer order, to writeEncodedLayer instead of calling
+  // writeLayer. The bytes are the sink's own format, never read by anyone else.
+  virtual bool encodesLayers() const { return false; }
+  virtual void encodeLayer(const MaskImage& mask, std::vector<uint8_t>& out) const {
+    (void)mask;
+    out.clear();
+  }
+  virtual void writeEncodedLayer(uint32_t index, double z, std::span<const uint8_t> encoded) {
+    (void)index, (void)z, (void)encoded;
   }
   // Completes the output and moves it under its final name. finalJob is the job as known at the end
   // (volumeMl filled); the layer count written is the number of writeLayer calls. Call at most once.
