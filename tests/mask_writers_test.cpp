@@ -997,6 +997,7 @@ TEST(ExrNames, SequenceReadersFindTheFrameNumber) {
 // ---------------------------------------------------------------------------------------------------
 // VDB
 
+using VdbGrid = TempDirTest;
 using VdbSlabs = TempDirTest;
 
 // Layers with full 8x8x8 blocks (tiles), partial blocks at the image edges and sparse noise.
@@ -1014,7 +1015,27 @@ void writeAll(MaskSink& sink, const std::vector<MaskImage>& layers, double z0, d
   for (uint32_t k = 0; k < layers.size(); ++k) sink.writeLayer(k, z0 + k * h, layers[k]);
 }
 
-TEST_F(VdbSlabs, BinaryMaskGridCountsAndTransform) {
+// What a layer reads back as: binary grids hold lit (255) or dark.
+MaskImage asRead(MaskImage m, bool antiAliased) {
+  if (!antiAliased)
+    for (uint8_t& p : m.pixels) p = p ? 255 : 0;
+  return m;
+}
+
+// Tight row extents, as the binary rasterizer keeps them.
+void addExtents(MaskImage& m) {
+  m.litBegin.assign(m.height, m.width);
+  m.litEnd.assign(m.height, 0);
+  for (uint32_t j = 0; j < m.height; ++j) {
+    for (uint32_t i = 0; i < m.width; ++i) {
+      if (m.pixels[size_t{j} * m.width + i] == 0) continue;
+      m.litBegin[j] = std::min(m.litBegin[j], i);
+      m.litEnd[j] = i + 1;
+    }
+  }
+}
+
+TEST_F(VdbGrid, BinaryStackIsOneMaskGridWithTransformAndMetadata) {
   const uint32_t width = 45, height = 29, count = 20;
   const MaskJob job = smallJob(width, height, count, false);
   const fs::path out = dir_ / "part.vdb";
@@ -1026,37 +1047,38 @@ TEST_F(VdbSlabs, BinaryMaskGridCountsAndTransform) {
   ASSERT_TRUE(fs::is_regular_file(out));
   EXPECT_EQ(strayEntries(out).size(), 0u);
 
-  const auto slabs = readVdbSlabs(out);
-  ASSERT_EQ(slabs.size(), 1u);
+  const auto grids = readVdbSlabs(out);
+  ASSERT_EQ(grids.size(), 1u);
   uint64_t lit = 0;
   for (const auto& m : layers) lit += litPixels(m);
-  EXPECT_EQ(slabs[0].name, "mask_00000");
-  EXPECT_EQ(slabs[0].valueType, "mask");
-  EXPECT_EQ(slabs[0].activeVoxels, lit);
-  EXPECT_EQ(slabs[0].firstLayer, 0);
-  EXPECT_EQ(slabs[0].lastLayer, 19);
-  EXPECT_NEAR(slabs[0].voxelSize[0], 0.05, 1e-12);
-  EXPECT_NEAR(slabs[0].voxelSize[1], 0.05, 1e-12);
-  EXPECT_NEAR(slabs[0].voxelSize[2], 0.025, 1e-12);
-  EXPECT_NEAR(slabs[0].voxelOrigin[0], -1.0 + 0.025, 1e-12);  // x0 + p/2
-  EXPECT_NEAR(slabs[0].voxelOrigin[1], 2.0 + 0.025, 1e-12);
-  EXPECT_NEAR(slabs[0].voxelOrigin[2], 0.0125, 1e-12);  // the first layer's plane
-  for (uint32_t k : {0u, 3u, 8u, 19u}) {
-    const MaskImage back = readVdbLayer(out, k, width, height);
-    MaskImage expected = layers[k];
-    for (uint8_t& p : expected.pixels) p = p ? 255 : 0;
-    EXPECT_TRUE(back.pixels == expected.pixels) << "layer " << k;
-  }
+  EXPECT_EQ(grids[0].name, "density");
+  EXPECT_EQ(grids[0].valueType, "mask");
+  EXPECT_EQ(grids[0].activeVoxels, lit);
+  EXPECT_EQ(grids[0].firstLayer, 0);
+  EXPECT_EQ(grids[0].lastLayer, 19);
+  EXPECT_NEAR(grids[0].voxelSize[0], 0.05, 1e-12);
+  EXPECT_NEAR(grids[0].voxelSize[1], 0.05, 1e-12);
+  EXPECT_NEAR(grids[0].voxelSize[2], 0.025, 1e-12);
+  EXPECT_NEAR(grids[0].voxelOrigin[0], -1.0 + 0.025, 1e-12);  // x0 + p/2
+  EXPECT_NEAR(grids[0].voxelOrigin[1], 2.0 + 0.025, 1e-12);
+  EXPECT_NEAR(grids[0].voxelOrigin[2], 0.0125, 1e-12);  // the first layer's plane
+  for (uint32_t k = 0; k < count; ++k)
+    EXPECT_TRUE(readVdbLayer(out, k, width, height).pixels == asRead(layers[k], false).pixels)
+        << "layer " << k;
+  EXPECT_THROW(readVdbLayer(out, count, width, height), InputError);
 
   if (!fs::exists("/usr/bin/vdb_print"))
     GTEST_SKIP() << "vdb_print not installed (Debian package libopenvdb-tools)";
   int rc = -1;
   const std::string text = runTool("/usr/bin/vdb_print -l '" + out.string() + "'", rc);
   EXPECT_EQ(rc, 0) << text;
-  EXPECT_NE(text.find("mask_00000"), std::string::npos) << text;
+  for (const char* expected : {"density", "first_z", "mirror_x", "origin_y", "layout: single"})
+    EXPECT_NE(text.find(expected), std::string::npos) << expected << "\n" << text;
 }
 
-TEST_F(VdbSlabs, AntiAliasedFloatGridsInSlabs) {
+// 150 layers (more than one old slab, not a multiple of 8), fully lit 8^3 blocks (tiles) in the middle,
+// anti-aliased values on the rims, every layer back exactly.
+TEST_F(VdbGrid, AntiAliasedStackIsOneFloatGrid) {
   const uint32_t width = 24, height = 17, count = 150;
   const MaskJob job = smallJob(width, height, count, true);
   const fs::path out = dir_ / "part.vdb";
@@ -1065,37 +1087,93 @@ TEST_F(VdbSlabs, AntiAliasedFloatGridsInSlabs) {
   writeAll(*sink, layers, 0.5, 0.025);
   sink->finish(job);
 
-  const auto slabs = readVdbSlabs(out);
-  ASSERT_EQ(slabs.size(), 3u);  // layers 0-63, 64-127, 128-149
-  const int first[] = {0, 64, 128}, last[] = {63, 127, 149};
-  for (size_t s = 0; s < 3; ++s) {
-    EXPECT_EQ(slabs[s].valueType, "float");
-    EXPECT_EQ(slabs[s].firstLayer, first[s]);
-    EXPECT_EQ(slabs[s].lastLayer, last[s]);
-    uint64_t lit = 0;
-    for (int k = first[s]; k <= last[s]; ++k) lit += litPixels(layers[static_cast<size_t>(k)]);
-    EXPECT_EQ(slabs[s].activeVoxels, lit) << slabs[s].name;
-    EXPECT_NEAR(slabs[s].voxelOrigin[2], 0.5, 1e-12);  // one transform for all slabs: k is absolute
-  }
-  EXPECT_EQ(slabs[1].name, "mask_00064");
-  for (uint32_t k : {0u, 63u, 64u, 100u, 149u}) {
+  const auto grids = readVdbSlabs(out);
+  ASSERT_EQ(grids.size(), 1u);
+  uint64_t lit = 0;
+  for (const auto& m : layers) lit += litPixels(m);
+  EXPECT_EQ(grids[0].name, "density");
+  EXPECT_EQ(grids[0].valueType, "float");
+  EXPECT_EQ(grids[0].activeVoxels, lit);
+  EXPECT_EQ(grids[0].lastLayer, 149);
+  EXPECT_NEAR(grids[0].voxelOrigin[2], 0.5, 1e-12);
+  for (uint32_t k = 0; k < count; ++k)
     EXPECT_TRUE(readVdbLayer(out, k, width, height).pixels == layers[k].pixels) << "layer " << k;
-  }
-  EXPECT_THROW(readVdbLayer(out, 150, width, height), InputError);
 }
 
-TEST_F(VdbSlabs, MirroredImagesKeepWorldPositions) {
+// The parallel path (encodeLayer anywhere, writeEncodedLayer in order) writes the same voxels as
+// writeLayer, with and without row extents (the binary rasterizer keeps them), for images whose sides
+// are not multiples of 8.
+TEST_F(VdbGrid, EncodedLayersGiveTheSameVoxels) {
+  for (const bool antiAliased : {false, true}) {
+    const uint32_t width = 37, height = 21, count = 19;
+    const MaskJob job = smallJob(width, height, count, antiAliased);
+    auto layers = vdbLayers(width, height, count, antiAliased);
+    for (uint32_t k = 0; k < count; ++k) {
+      const MaskImage noise = noiseMask(width, height, k, !antiAliased);
+      for (size_t p = 0; p < noise.pixels.size(); p += 5) layers[k].pixels[p] = noise.pixels[p];
+      if (k == 4) std::fill(layers[k].pixels.begin(), layers[k].pixels.end(), 0);  // a dark layer
+      if (k % 2 == 0) addExtents(layers[k]);
+    }
+    const fs::path out = dir_ / (antiAliased ? "aa.vdb" : "bin.vdb");
+    auto sink = makeMaskSink(out, job, false);
+    std::vector<EncodedMaskLayer> encoded(count);
+    MaskEncodeScratch scratch;
+    for (uint32_t k = count; k-- > 0;)  // any order
+      sink->encodeLayer(k, 0.1 + k * 0.025, layers[k], encoded[k], scratch);
+    for (uint32_t k = 0; k < count; ++k) sink->writeEncodedLayer(k, 0.1 + k * 0.025, encoded[k]);
+    sink->finish(job);
+    for (uint32_t k = 0; k < count; ++k) {
+      EXPECT_TRUE(readVdbLayer(out, k, width, height).pixels == asRead(layers[k], antiAliased).pixels)
+          << (antiAliased ? "anti-aliased" : "binary") << " layer " << k;
+    }
+  }
+}
+
+TEST_F(VdbGrid, MirroredImagesKeepWorldPositions) {
   MaskJob job = smallJob(10, 6, 1, false);
   job.grid.mirrorX = true;
   const fs::path out = dir_ / "m.vdb";
   auto sink = makeMaskSink(out, job, false);
   sink->writeLayer(0, 1.0, discMask(10, 6, 5, 3, 2, false));
   sink->finish(job);
-  const auto slabs = readVdbSlabs(out);
-  ASSERT_EQ(slabs.size(), 1u);
-  EXPECT_NEAR(slabs[0].voxelOrigin[0], -1.0 + 9.5 * 0.05, 1e-12);  // pixel 0 shows column width-1
-  EXPECT_NEAR(slabs[0].voxelOrigin[1], 2.0 + 0.025, 1e-12);
-  EXPECT_NEAR(slabs[0].voxelSize[0], 0.05, 1e-12);
+  const auto grids = readVdbSlabs(out);
+  ASSERT_EQ(grids.size(), 1u);
+  EXPECT_NEAR(grids[0].voxelOrigin[0], -1.0 + 9.5 * 0.05, 1e-12);  // pixel 0 shows column width-1
+  EXPECT_NEAR(grids[0].voxelOrigin[1], 2.0 + 0.025, 1e-12);
+  EXPECT_NEAR(grids[0].voxelSize[0], 0.05, 1e-12);
+}
+
+TEST_F(VdbSlabs, SlabLayoutWritesOneGridPer64Layers) {
+  for (const bool antiAliased : {false, true}) {
+    const uint32_t width = 24, height = 17, count = 150;
+    MaskJob job = smallJob(width, height, count, antiAliased);
+    job.vdbSlabs = true;
+    const fs::path out = dir_ / (antiAliased ? "aa.vdb" : "bin.vdb");
+    const auto layers = vdbLayers(width, height, count, antiAliased);
+    auto sink = makeMaskSink(out, job, false);
+    writeAll(*sink, layers, 0.5, 0.025);
+    sink->finish(job);
+
+    const auto slabs = readVdbSlabs(out);
+    ASSERT_EQ(slabs.size(), 3u);  // layers 0-63, 64-127, 128-149
+    const int first[] = {0, 64, 128}, last[] = {63, 127, 149};
+    for (size_t s = 0; s < 3; ++s) {
+      EXPECT_EQ(slabs[s].valueType, antiAliased ? "float" : "mask");
+      EXPECT_EQ(slabs[s].firstLayer, first[s]);
+      EXPECT_EQ(slabs[s].lastLayer, last[s]);
+      uint64_t lit = 0;
+      for (int k = first[s]; k <= last[s]; ++k) lit += litPixels(layers[static_cast<size_t>(k)]);
+      EXPECT_EQ(slabs[s].activeVoxels, lit) << slabs[s].name;
+      EXPECT_NEAR(slabs[s].voxelOrigin[2], 0.5, 1e-12);  // one transform for all slabs: k is absolute
+    }
+    EXPECT_EQ(slabs[0].name, "mask_00000");
+    EXPECT_EQ(slabs[1].name, "mask_00064");
+    for (uint32_t k : {0u, 63u, 64u, 100u, 149u}) {
+      EXPECT_TRUE(readVdbLayer(out, k, width, height).pixels == asRead(layers[k], antiAliased).pixels)
+          << "layer " << k;
+    }
+    EXPECT_THROW(readVdbLayer(out, 150, width, height), InputError);
+  }
 }
 
 // ---------------------------------------------------------------------------------------------------

@@ -305,6 +305,8 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
       {"-o", "a.cli", "--printer", "sl1"},
       {"-o", "a.cli", "--on-mismatch", "rebuild"},
       {"-o", "a.cli", "--join-tolerance", "0.001"},
+      {"-o", "a.cli", "--vdb-layout", "slabs"},
+      {"--masks", "m.sl1", "--vdb-layout", "slabs", "--printer", "sl1"},
   };
   for (const auto& args : cases) {
     std::vector<std::string> all{"slice", examplePart().string()};

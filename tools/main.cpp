@@ -385,6 +385,12 @@ int run(int argc, char** argv) {
     slice->add_option(keyOptions[i], keyValues[i], keys[i].help)
         ->group(keys[i].owner == SettingOwner::Printer ? "Printer settings" : "Material settings");
   }
+  std::string vdbLayout = "single";
+  slice
+      ->add_option("--vdb-layout", vdbLayout,
+                   ".vdb masks: single (one grid for the whole stack, default) or slabs (one grid per "
+                   "64 layers: memory bounded by a slab, for very tall or finely detailed stacks)")
+      ->check(CLI::IsMember({"single", "slabs"}));
   std::vector<std::string> addFeatures, removeFeatures;
   slice->add_option("--add", addFeatures, "Add-on feature mesh, sliced on its own (repeatable)");
   slice->add_option("--remove", removeFeatures,
@@ -490,6 +496,12 @@ int run(int argc, char** argv) {
     for (const char* opt :
          {"--pixel", "--resolution", "--origin", "--mirror-x", "--mirror-y", "--antialias", "--crop"})
       needs(slice->count(opt) > 0, masks, opt, "mask output (--masks)");
+    std::string maskExt = options.masks.output.extension().string();
+    std::transform(maskExt.begin(), maskExt.end(), maskExt.begin(),
+                   [](char c) { return static_cast<char>(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c); });
+    needs(slice->count("--vdb-layout") > 0, maskExt == ".vdb", "--vdb-layout",
+          "a .vdb mask output (--masks FILE.vdb)");
+    options.masks.vdbSlabs = vdbLayout == "slabs";
     needs(slice->count("--on-mismatch") > 0, !templatePath.empty(), "--on-mismatch",
           "a template (--template)");
     needs(slice->count("--join-tolerance") > 0, method != "sr", "--join-tolerance",

@@ -129,6 +129,7 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
                     const std::string& name, const std::vector<double>& planes) {
   MaskJob job;
   job.name = name;
+  job.vdbSlabs = o.vdbSlabs;
   uint32_t width = print.pixelsX, height = print.pixelsY;
   double pixel = print.pixelsX > 0 && print.displayWidth > 0 ? print.displayWidth / print.pixelsX : 0.0;
   if (print.pixelsY > 0 && print.displayHeight > 0 && pixel > 0 &&

@@ -31,7 +31,8 @@ struct MaskOptions {
   std::optional<std::pair<double, double>> origin;          // lower-left corner of pixel (0, 0), mm
   bool mirrorX = false, mirrorY = false;
   bool antialias = false;
-  bool crop = false;  // allow a model larger than the image
+  bool crop = false;      // allow a model larger than the image
+  bool vdbSlabs = false;  // .vdb only: one grid per slab of layers instead of one grid (--vdb-layout slabs)
 };
 
 struct SliceJobOptions {

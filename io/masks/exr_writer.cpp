@@ -245,7 +245,7 @@ void encodeExrMaskLayer(const MaskImage& mask, const MaskJob& job, uint32_t inde
   step([&] { return exr_attr_set_int(ctxt, part, "mirrorX", job.grid.mirrorX ? 1 : 0); });
   step([&] { return exr_attr_set_int(ctxt, part, "mirrorY", job.grid.mirrorY ? 1 : 0); });
   for (const auto& [key, value] : job.settings) {  // the printer and material settings (mask_sink.h)
-    const std::string attribute = "ts:" + key;  // EXR attribute names have at most 31 bytes
+    const std::string attribute = "ts:" + key;     // EXR attribute names have at most 31 bytes
     step([&] { return exr_attr_set_string(ctxt, part, attribute.c_str(), value.c_str()); });
   }
   step([&] { return exr_write_header(ctxt); });

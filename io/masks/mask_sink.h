@@ -2,8 +2,9 @@
 //
 // Contract shared by every sink:
 // - Layers arrive in order, index 0, 1, 2, ... (one thread at a time; a sink is not thread-safe), each
-//   a MaskImage of exactly job.grid.width x job.grid.height. Memory never grows with the layer count:
-//   a sink keeps at most one slab of layers (VDB) plus per-file bookkeeping.
+//   a MaskImage of exactly job.grid.width x job.grid.height. Memory never grows with the layer count,
+//   except for the VDB sink's default single grid, whose tree stays in memory until finish() (OpenVDB
+//   writes a grid at once; its slab layout keeps one slab); the others keep per-file bookkeeping.
 // - A layer goes in either whole (writeLayer) or in two steps (encodeLayer, then writeEncodedLayer), so
 //   that the caller can encode layers in parallel and only write them in order: encodeLayer is
 //   thread-safe and may run for many layers at once; writeEncodedLayer takes its results in layer order.
@@ -50,6 +51,9 @@ struct MaskJob {
   // prusaslicer.ini (PrusaSlicer's keys) and as metadata "toposlice:<key>" into EXR and VDB files.
   std::string printerProfile, materialName;
   std::vector<std::pair<std::string, std::string>> settings;
+  // VDB only: one grid per slab of kVdbSlabLayers layers (io/masks/vdb_writer.h) instead of one grid for
+  // the whole stack; ignored by the other formats.
+  bool vdbSlabs = false;
 };
 
 // One layer as encodeLayer leaves it for writeEncodedLayer.

@@ -74,29 +74,50 @@ class SlabArchive : public openvdb::io::Archive {
   int32_t count_ = 0;
 };
 
-bool hasZeroByte(uint64_t x) {
-  return ((x - 0x0101010101010101ull) & ~x & 0x8080808080808080ull) != 0;
-}
-
 std::string slabName(uint32_t firstLayer) {
   std::string digits = std::to_string(firstLayer);
   if (digits.size() < 5) digits.insert(0, 5 - digits.size(), '0');
   return "mask_" + digits;
 }
 
+// kSpread[b]: bit y of b moved to bit 8 y (a column of a block, bits by row, spread to one bit per row
+// of a leaf word, whose bits are y * 8 + z).
+constexpr std::array<uint64_t, 256> makeSpread() {
+  std::array<uint64_t, 256> table{};
+  for (uint32_t b = 0; b < 256; ++b)
+    for (uint32_t y = 0; y < 8; ++y)
+      if (b & (1u << y)) table[b] |= uint64_t{1} << (8 * y);
+  return table;
+}
+constexpr std::array<uint64_t, 256> kSpread = makeSpread();
+
+// One bit per byte: bit 8 x of the result is set when byte x of `w` is non-zero.
+uint64_t nonZeroBytes(uint64_t w) {
+  constexpr uint64_t low7 = 0x7F7F7F7F7F7F7F7Full;
+  return ((((w & low7) + low7) | w) >> 7) & 0x0101010101010101ull;
+}
+
+// Encoded layer (encodeLayer -> writeEncodedLayer): for every 8 x 8 pixel block with a lit pixel, in
+// block order (row of blocks by row of blocks from the bottom, left to right), a record
+//   uint32 block index (by * blocksX + bx), uint64 lit columns (byte x: bit y set when pixel (x, y) of
+//   the block is lit), and for anti-aliased jobs 64 pixel values (row y, then column x).
+// Pixels past the image's right or top edge count as dark.
 template <class GridT>
-class VdbSink final : public MaskSink {
+class VdbSink final : public EncodingMaskSink {
   using TreeT = typename GridT::TreeType;
   using LeafT = typename TreeT::LeafNodeType;
   using ValueT = typename GridT::ValueType;
   static constexpr bool kIsMask = std::is_same_v<ValueT, bool>;
   static constexpr std::size_t kLeafBytes = sizeof(LeafT) + (kIsMask ? 0 : LeafT::SIZE * sizeof(ValueT));
+  static constexpr std::size_t kRecordBytes = 4 + 8 + (kIsMask ? 0 : 64);
 
  public:
   VdbSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
-      : file_(path, overwrite), job_(job), plane_(size_t{job.grid.width} * job.grid.height) {
+      : file_(path, overwrite),
+        job_(job),
+        blocksX_((job.grid.width + 7) / 8),
+        blocksY_((job.grid.height + 7) / 8) {
     openvdb::initialize();
-    band_.resize(plane_ * kBandLayers);
     for (int v = 0; v < 256; ++v) {
       if constexpr (kIsMask) {
         toValue_[v] = v != 0;
@@ -110,7 +131,9 @@ class VdbSink final : public MaskSink {
     fileMeta.insertMeta("layer_count", openvdb::Int32Metadata(static_cast<int32_t>(job.layerCount)));
     fileMeta.insertMeta("layer_height", openvdb::DoubleMetadata(job.layerHeight));
     fileMeta.insertMeta("pixel_size", openvdb::DoubleMetadata(job.grid.pixel));
-    fileMeta.insertMeta("slab_layers", openvdb::Int32Metadata(static_cast<int32_t>(kVdbSlabLayers)));
+    fileMeta.insertMeta("layout", openvdb::StringMetadata(job.vdbSlabs ? "slabs" : "single"));
+    if (job.vdbSlabs)
+      fileMeta.insertMeta("slab_layers", openvdb::Int32Metadata(static_cast<int32_t>(kVdbSlabLayers)));
     for (const auto& [key, value] : job.settings)  // the printer and material settings (mask_sink.h)
       fileMeta.insertMeta("toposlice:" + key, openvdb::StringMetadata(value));
     try {
@@ -122,14 +145,62 @@ class VdbSink final : public MaskSink {
     }
   }
 
-  void writeLayer(uint32_t index, double z, const MaskImage& mask) override {
+  // The layer's lit 8 x 8 blocks (see "Encoded layer" above); thread-safe.
+  void encodeLayer(uint32_t /*index*/, double /*z*/, const MaskImage& mask, EncodedMaskLayer& encoded,
+                   MaskEncodeScratch& /*scratch*/) const override {
+    std::vector<uint8_t>& out = encoded.bytes;
+    out.clear();
+    const uint32_t width = job_.grid.width, height = job_.grid.height;
+    if (mask.width != width || mask.height != height || mask.pixels.size() != size_t{width} * height) {
+      out.push_back(0);  // not a whole number of records: writeEncodedLayer reports the size mismatch
+      return;
+    }
+    const bool extents = mask.hasExtents();
+    for (uint32_t by = 0; by < blocksY_; ++by) {
+      const uint32_t y0 = by * 8, ny = std::min(8u, height - y0);
+      uint32_t lo = 0, hi = width;  // columns that may hold lit pixels in these rows
+      if (extents) {
+        lo = width;
+        hi = 0;
+        for (uint32_t y = y0; y < y0 + ny; ++y) {
+          if (mask.litBegin[y] >= mask.litEnd[y]) continue;
+          lo = std::min(lo, mask.litBegin[y]);
+          hi = std::max(hi, mask.litEnd[y]);
+        }
+        if (lo >= hi) continue;
+      }
+      for (uint32_t bx = lo / 8; bx < (hi + 7) / 8; ++bx) {
+        const uint32_t x0 = bx * 8, nx = std::min(8u, width - x0);
+        uint64_t rows[8] = {};
+        for (uint32_t y = 0; y < ny; ++y) {
+          const uint8_t* src = mask.pixels.data() + size_t{y0 + y} * width + x0;
+          if (nx == 8) {
+            std::memcpy(&rows[y], src, 8);
+          } else {
+            std::memcpy(&rows[y], src, nx);
+          }
+        }
+        uint64_t columns = 0;
+        for (uint32_t y = 0; y < 8; ++y) columns |= nonZeroBytes(rows[y]) << y;
+        if (columns == 0) continue;
+        const uint32_t index = by * blocksX_ + bx;
+        const size_t at = out.size();
+        out.resize(at + kRecordBytes);
+        std::memcpy(out.data() + at, &index, 4);
+        std::memcpy(out.data() + at + 4, &columns, 8);
+        if constexpr (!kIsMask) std::memcpy(out.data() + at + 12, rows, 64);
+      }
+    }
+  }
+
+  void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) override {
+    const std::vector<uint8_t>& encoded = layer.bytes;
     const std::string where = file_.finalPath().string() + ": layer " + std::to_string(index);
     if (index != next_) throw OutputError(where + " arrived, expected " + std::to_string(next_));
-    if (mask.width != job_.grid.width || mask.height != job_.grid.height || mask.pixels.size() != plane_) {
-      throw OutputError(where + " does not match the job's image size");
-    }
+    if (encoded.size() % kRecordBytes != 0) throw OutputError(where + " does not match the job's image size");
     if (index == 0) zFirst_ = z;
-    std::memcpy(band_.data() + plane_ * (index % kBandLayers), mask.pixels.data(), plane_);
+    band_.insert(band_.end(), encoded.begin(), encoded.end());
+    bandEnds_[bandLayers_] = band_.size();
     ++bandLayers_;
     ++next_;
     if (bandLayers_ == kBandLayers) endBand();
@@ -137,7 +208,7 @@ class VdbSink final : public MaskSink {
 
   void finish(const MaskJob& /*finalJob*/) override {
     if (bandLayers_ > 0) endBand();
-    flushSlab();
+    flushGrid();
     try {
       archive_->close();
     } catch (const std::exception& e) {
@@ -150,63 +221,88 @@ class VdbSink final : public MaskSink {
   }
 
  private:
-  // Turns the buffered band (layers bandFirst .. bandFirst + bandLayers_ - 1, bandFirst a multiple of
-  // 8) into tiles and leaves of the slab's tree, then closes the slab when it is full.
+  // Merges the band's encoded layers (bandFirst .. bandFirst + bandLayers_ - 1, bandFirst a multiple of
+  // 8) block by block into the tree: a block lit in all 8 layers becomes a tile, any other lit block a
+  // leaf; then closes the slab when the layout has slabs and this one is full.
   void endBand() {
-    const uint32_t width = job_.grid.width, height = job_.grid.height, depth = bandLayers_;
+    const uint32_t depth = bandLayers_;
     const uint32_t bandFirst = next_ - depth;
-    TreeT& tree = grid_->tree();
-    const ValueT on = toValue_[255];
-    for (uint32_t by = 0; by < height; by += 8) {
-      const uint32_t ny = std::min(8u, height - by);
-      for (uint32_t bx = 0; bx < width; bx += 8) {
-        const uint32_t nx = std::min(8u, width - bx);
-        bool any = false;
-        bool full = nx == 8 && ny == 8 && depth == kBandLayers;
-        for (uint32_t kz = 0; kz < depth; ++kz) {
-          for (uint32_t y = 0; y < ny; ++y) {
-            const uint8_t* row = band_.data() + plane_ * kz + size_t{by + y} * width + bx;
-            if (nx == 8) {
-              uint64_t word;
-              std::memcpy(&word, row, 8);
-              any = any || word != 0;
-              full = full && (kIsMask ? !hasZeroByte(word) : word == ~uint64_t{0});
-            } else {
-              for (uint32_t x = 0; x < nx; ++x) any = any || row[x] != 0;
-            }
-          }
-        }
-        if (!any) continue;
-        const openvdb::Coord origin(static_cast<int>(bx), static_cast<int>(by), static_cast<int>(bandFirst));
-        if (full) {
-          tree.addTile(1, origin, on, true);  // level 1: a tile the size of one leaf node
-          continue;
-        }
-        LeafT* leaf = tree.touchLeaf(origin);
-        ++slabLeaves_;
-        for (uint32_t kz = 0; kz < depth; ++kz) {
-          for (uint32_t y = 0; y < ny; ++y) {
-            const uint8_t* row = band_.data() + plane_ * kz + size_t{by + y} * width + bx;
-            for (uint32_t x = 0; x < nx; ++x) {
-              if (row[x] == 0) continue;
-              const openvdb::Index offset = LeafT::coordToOffset(
-                  origin.offsetBy(static_cast<int>(x), static_cast<int>(y), static_cast<int>(kz)));
-              if constexpr (kIsMask) {
-                leaf->setValueOn(offset);
-              } else {
-                leaf->setValueOn(offset, toValue_[row[x]]);
-              }
-            }
-          }
-        }
-      }
+    size_t cursor[kBandLayers], end[kBandLayers];
+    for (uint32_t z = 0; z < depth; ++z) {
+      cursor[z] = z == 0 ? 0 : bandEnds_[z - 1];
+      end[z] = bandEnds_[z];
     }
+    mergeBand(depth, bandFirst, cursor, end);
+    band_.clear();
     slabLayers_ += depth;
     bandLayers_ = 0;
-    if (slabLayers_ >= kVdbSlabLayers || slabLeaves_ * kLeafBytes >= kVdbSlabLeafBytes) flushSlab();
+    if (job_.vdbSlabs && (slabLayers_ >= kVdbSlabLayers || slabLeaves_ * kLeafBytes >= kVdbSlabLeafBytes))
+      flushGrid();
   }
 
-  void flushSlab() {
+  void mergeBand(uint32_t depth, uint32_t bandFirst, size_t* cursor, const size_t* end) {
+    openvdb::tree::ValueAccessor<TreeT> access(grid_->tree());
+    const ValueT on = toValue_[255];
+    const uint8_t* bytes = band_.data();
+    auto indexAt = [&](uint32_t z) {
+      uint32_t index;
+      std::memcpy(&index, bytes + cursor[z], 4);
+      return index;
+    };
+    for (;;) {
+      uint32_t block = UINT32_MAX;
+      for (uint32_t z = 0; z < depth; ++z)
+        if (cursor[z] < end[z]) block = std::min(block, indexAt(z));
+      if (block == UINT32_MAX) break;
+      // The layers holding this block, and whether every one of the 8 is fully lit.
+      const uint8_t* record[kBandLayers] = {};
+      bool full = depth == kBandLayers;
+      for (uint32_t z = 0; z < depth; ++z) {
+        if (cursor[z] < end[z] && indexAt(z) == block) {
+          record[z] = bytes + cursor[z];
+          cursor[z] += kRecordBytes;
+          uint64_t columns;
+          std::memcpy(&columns, record[z] + 4, 8);
+          full = full && columns == ~uint64_t{0} && (kIsMask || allLit(record[z] + 12));
+        } else {
+          full = false;
+        }
+      }
+      const openvdb::Coord origin(static_cast<int>(block % blocksX_ * 8),
+                                  static_cast<int>(block / blocksX_ * 8), static_cast<int>(bandFirst));
+      if (full) {
+        access.addTile(1, origin, on, true);  // level 1: a tile the size of one leaf node
+        continue;
+      }
+      LeafT* leaf = access.touchLeaf(origin);
+      ++slabLeaves_;
+      typename LeafT::NodeMaskType active;  // word x, bit y * 8 + z (LeafNode offset x * 64 + y * 8 + z)
+      for (uint32_t z = 0; z < depth; ++z) {
+        if (record[z] == nullptr) continue;
+        uint64_t columns;
+        std::memcpy(&columns, record[z] + 4, 8);
+        for (uint32_t x = 0; x < 8; ++x)
+          active.template getWord<uint64_t>(x) |= kSpread[(columns >> (8 * x)) & 0xFF] << z;
+        if constexpr (!kIsMask) {
+          ValueT* values = leaf->buffer().data();
+          const uint8_t* pixels = record[z] + 12;
+          for (uint32_t y = 0; y < 8; ++y)
+            for (uint32_t x = 0; x < 8; ++x)
+              if (pixels[y * 8 + x] != 0) values[x * 64 + y * 8 + z] = toValue_[pixels[y * 8 + x]];
+        }
+      }
+      leaf->setValueMask(active);
+    }
+  }
+
+  static bool allLit(const uint8_t* pixels) {
+    for (int i = 0; i < 64; ++i)
+      if (pixels[i] != 255) return false;
+    return true;
+  }
+
+  // Writes the open grid (the whole stack, or one slab) and starts the next one.
+  void flushGrid() {
     if (slabLayers_ == 0) return;
     const uint32_t first = next_ - slabLayers_;
     const double p = job_.grid.pixel;
@@ -218,12 +314,17 @@ class VdbSink final : public MaskSink {
     transform->preScale(scale);
     transform->postTranslate(offset);
     grid_->setTransform(transform);
-    grid_->setName(slabName(first));
+    grid_->setName(job_.vdbSlabs ? slabName(first) : std::string(kVdbGridName));
     if constexpr (!kIsMask) grid_->setGridClass(openvdb::GRID_FOG_VOLUME);
     grid_->insertMeta("first_layer", openvdb::Int32Metadata(static_cast<int32_t>(first)));
     grid_->insertMeta("last_layer", openvdb::Int32Metadata(static_cast<int32_t>(next_ - 1)));
     grid_->insertMeta("layer_height", openvdb::DoubleMetadata(job_.layerHeight));
     grid_->insertMeta("pixel_size", openvdb::DoubleMetadata(p));
+    grid_->insertMeta("first_z", openvdb::DoubleMetadata(zFirst_));
+    grid_->insertMeta("origin_x", openvdb::DoubleMetadata(job_.grid.x0));
+    grid_->insertMeta("origin_y", openvdb::DoubleMetadata(job_.grid.y0));
+    grid_->insertMeta("mirror_x", openvdb::BoolMetadata(job_.grid.mirrorX));
+    grid_->insertMeta("mirror_y", openvdb::BoolMetadata(job_.grid.mirrorY));
     try {
       archive_->writeSlab(grid_);
     } catch (const std::exception& e) {
@@ -238,10 +339,11 @@ class VdbSink final : public MaskSink {
 
   OutputFile file_;  // declared first: destroyed last, after archive_ has closed its stream
   MaskJob job_;
-  size_t plane_;
-  std::vector<uint8_t> band_;  // kBandLayers layers, each plane_ bytes, rows bottom-up
+  uint32_t blocksX_, blocksY_;
+  std::vector<uint8_t> band_;                   // the band's encoded layers, one after another
+  std::array<size_t, kBandLayers> bandEnds_{};  // end of layer z's records in band_
   std::array<ValueT, 256> toValue_{};
-  typename GridT::Ptr grid_;  // the open slab
+  typename GridT::Ptr grid_;  // the open grid
   std::optional<SlabArchive> archive_;
   double zFirst_ = 0;
   uint32_t next_ = 0, bandLayers_ = 0, slabLayers_ = 0;
