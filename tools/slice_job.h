@@ -76,7 +76,7 @@ struct SliceJobResult {
 // extensions. Throws InputError naming the option.
 void validateSliceOptions(const SliceJobOptions& options);
 
-// The mask output extensions toposlice writes, for messages: ".sl1, .sl1s, .exr, .vdb, or a folder of
+// The mask output extensions toposlice writes, for messages: ".sl1, .sl1s, .goo, .exr, .vdb, or a folder of
 // PNGs (a name without an extension)".
 std::string maskOutputKinds();
 

@@ -69,14 +69,8 @@ double estimatedPrintTime(const MaskJob& job, uint32_t layers) {
 }
 
 std::time_t creationTime(const MaskJob& job) {
-  if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) {
-    char* end = nullptr;
-    errno = 0;
-    const long long v = std::strtoll(epoch, &end, 10);
-    if (errno == 0 && end != epoch && *end == '\0' && v >= 0) return static_cast<std::time_t>(v);
-  }
   constexpr std::time_t kZipEpoch = 315532800;  // 1980-01-01 00:00:00 UTC, the earliest zip time
-  return job.created > kZipEpoch ? static_cast<std::time_t>(job.created) : kZipEpoch;
+  return std::max(maskCreationTime(job), kZipEpoch);
 }
 
 uint32_t getLE32(const uint8_t* p) {
