@@ -310,9 +310,9 @@ int run(int argc, char** argv) {
                     "mm; cp and sr-lazy join segment ends this close (default 1e-5)");
   std::string resolution, origin;
   slice->add_option("--contours", outputs, "Same as -o: contour output (.cli, .svg, .3mf)");
-  slice->add_option(
-      "--masks", options.masks.output,
-      "Mask stack: .sl1 (Prusa SL1 zip of PNGs), .goo (Elegoo), .exr, .vdb, or a directory of PNGs");
+  slice->add_option("--masks", options.masks.output,
+                    "Mask stack: .sl1 (Prusa SL1 zip of PNGs), .goo (Elegoo), .nanodlp, .exr, .vdb, or a "
+                    "directory of PNGs");
   slice->add_option(
       "--printer", options.masks.printer,
       "Printer preset: " + printerNames() + " (generic-4k has no fixed pixel size: add --pixel)");

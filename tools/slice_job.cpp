@@ -260,7 +260,7 @@ void checkNotAnInput(const std::filesystem::path& output, const std::vector<std:
 }
 
 std::string maskOutputKinds() {
-  return ".sl1, .sl1s, .goo, .exr, .vdb, or a folder of PNGs (a name without an extension)";
+  return ".sl1, .sl1s, .goo, .nanodlp, .exr, .vdb, or a folder of PNGs (a name without an extension)";
 }
 
 void validateSliceOptions(const SliceJobOptions& options) {
@@ -284,7 +284,8 @@ void validateSliceOptions(const SliceJobOptions& options) {
     throw InputError("--origin: expected finite X,Y in mm");
   if (!options.masks.output.empty()) {
     const std::string ext = lowerExtension(options.masks.output);
-    if (!ext.empty() && ext != ".sl1" && ext != ".sl1s" && ext != ".goo" && ext != ".exr" && ext != ".vdb")
+    if (!ext.empty() && ext != ".sl1" && ext != ".sl1s" && ext != ".goo" && ext != ".nanodlp" &&
+        ext != ".exr" && ext != ".vdb")
       throw InputError(options.masks.output.string() + ": toposlice does not write '" + ext +
                        "' masks; it writes " + maskOutputKinds());
   }

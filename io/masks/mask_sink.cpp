@@ -10,6 +10,7 @@
 #include "io/errors.h"
 #include "io/masks/exr_writer.h"
 #include "io/masks/goo_writer.h"
+#include "io/masks/nanodlp_writer.h"
 #include "io/masks/png_directory_writer.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
@@ -66,6 +67,7 @@ std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const 
                  [](char c) { return static_cast<char>(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c); });
   if (ext == ".sl1" || ext == ".sl1s") return makeSl1Sink(path, job, overwrite);
   if (ext == ".goo") return makeGooSink(path, job, overwrite);
+  if (ext == ".nanodlp") return makeNanoDlpSink(path, job, overwrite);
   if (ext == ".exr") return makeExrSink(path, job, overwrite);
   if (ext == ".vdb") return makeVdbSink(path, job, overwrite);
   return makePngDirectorySink(path, job, overwrite);
