@@ -20,6 +20,7 @@
 #include "io/masks/mask_png.h"
 #include "io/masks/zip_stream.h"
 #include "io/output_file.h"
+#include "io/preview_png.h"
 
 namespace toposlice {
 namespace {
@@ -73,6 +74,11 @@ class Sl1Sink final : public EncodingMaskSink {
     if (job.layerCount > kSl1MaxLayers) {
       throw OutputError(path.string() + ": an SL1 archive holds at most " + std::to_string(kSl1MaxLayers) +
                         " layers (5-digit layer names); this job has " + std::to_string(job.layerCount));
+    }
+    job_.previewModel = {};
+    if (!job.previewModel.empty()) {  // PrusaSlicer's two thumbnails, as it names them
+      zip_.add("thumbnail/thumbnail400x400.png", previewPng(job.previewModel, 400, 400));
+      zip_.add("thumbnail/thumbnail800x480.png", previewPng(job.previewModel, 800, 480));
     }
   }
 
