@@ -62,6 +62,7 @@ std::vector<std::string_view> signaturesFor(const std::string& ext) {
   if (ext == ".3mf" || ext == ".sl1" || ext == ".sl1s" || ext == ".nanodlp") return {"PK\x03\x04"sv};
   if (ext == ".goo") return {"V3.0\x07\0\0\0DLP\0"sv};  // version, then the magic tag
   if (ext == ".vdb") return {" BDV"sv};
+  if (ext == ".png") return {"\x89PNG"sv};
   if (ext == ".topo") return {"TOPOSLC"sv};
   if (ext == ".csv") return {"layer,"sv};
   if (ext == ".json") return {"{"sv};

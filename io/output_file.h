@@ -109,10 +109,10 @@ enum class OutputKind { File, LayerFolder };
 
 // Throws OutputError unless the existing entry at `path` may be replaced by a toposlice output of that
 // kind: a File output replaces a regular file (or a link) whose first bytes match the format of its
-// extension (.cli, .svg, .3mf, .sl1, .sl1s, .goo, .nanodlp, .vdb, .topo, .csv, .json; any empty file; a file
-// of another extension is not checked); a LayerFolder output replaces a folder holding only regular files
-// named <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png", ".exr"). The message
-// names one entry toposlice would not have written. A missing path is fine.
+// extension (.cli, .svg, .3mf, .sl1, .sl1s, .goo, .nanodlp, .vdb, .png, .topo, .csv, .json; any empty file; a
+// file of another extension is not checked); a LayerFolder output replaces a folder holding only regular
+// files named <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png", ".exr"). The
+// message names one entry toposlice would not have written. A missing path is fine.
 void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
 
 // A group of outputs that appear together or not at all (see the transactions paragraph above). While
