@@ -60,8 +60,10 @@ std::vector<std::string_view> signaturesFor(const std::string& ext) {
   using namespace std::string_view_literals;
   if (ext == ".cli") return {"$$HEADERSTART"sv};
   if (ext == ".svg") return {"<?xml"sv, "<svg"sv};
-  if (ext == ".3mf" || ext == ".sl1" || ext == ".sl1s") return {"PK\x03\x04"sv};
+  if (ext == ".3mf" || ext == ".sl1" || ext == ".sl1s" || ext == ".nanodlp") return {"PK\x03\x04"sv};
+  if (ext == ".goo") return {"V3.0\x07\0\0\0DLP\0"sv};  // version, then the magic tag
   if (ext == ".vdb") return {" BDV"sv};
+  if (ext == ".png") return {"\x89PNG"sv};
   if (ext == ".topo") return {"TOPOSLC"sv};
   if (ext == ".csv") return {"layer,"sv};
   if (ext == ".json") return {"{"sv};
@@ -194,6 +196,24 @@ void OutputFile::write(const void* data, std::size_t size) {
   } else {
     std::memcpy(buffer_.get(), bytes, size);
     used_ = size;
+  }
+}
+
+void OutputFile::rewriteAt(std::uint64_t offset, const void* data, std::size_t size) {
+  assert(!committed_ && fd_ >= 0 && offset + size <= bytesWritten());
+  if (failed_) fail("cannot write", EIO);
+  flushBuffer();
+  const char* bytes = static_cast<const char*>(data);
+  while (size > 0) {
+    const ssize_t n = ::pwrite(fd_, bytes, size, static_cast<off_t>(offset));
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      fail("cannot write", errno);
+    }
+    if (n == 0) fail("cannot write", EIO);
+    bytes += n;
+    offset += static_cast<std::uint64_t>(n);
+    size -= static_cast<std::size_t>(n);
   }
 }
 

@@ -53,6 +53,10 @@ class OutputFile {
   // the file can only be abandoned. Not allowed after commit().
   void write(const void* data, std::size_t size);
 
+  // Replaces size bytes already written, at `offset` (offset + size <= bytesWritten()): a header whose
+  // counts are known only at the end. Writes out the buffer first. Throws OutputError like write().
+  void rewriteAt(std::uint64_t offset, const void* data, std::size_t size);
+
   // Writes out the buffer, closes and renames the temporary to the final path (or, in a transaction,
   // hands the closed temporary to it). Throws OutputError on failure (the temporary is then removed by
   // the destructor). Call at most once.
@@ -112,10 +116,10 @@ enum class OutputKind { File, LayerFolder };
 
 // Throws OutputError unless the existing entry at `path` may be replaced by a toposlice output of that
 // kind: a File output replaces a regular file (or a link) whose first bytes match the format of its
-// extension (.cli, .svg, .3mf, .sl1, .sl1s, .vdb, .topo, .csv, .json; any empty file; a file of another
-// extension is not checked); a LayerFolder output replaces a folder holding only regular files named
-// <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png", ".exr"). The message
-// names one entry toposlice would not have written. A missing path is fine.
+// extension (.cli, .svg, .3mf, .sl1, .sl1s, .goo, .nanodlp, .vdb, .png, .topo, .csv, .json; any empty file; a
+// file of another extension is not checked); a LayerFolder output replaces a folder holding only regular
+// files named <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png", ".exr"). The
+// message names one entry toposlice would not have written. A missing path is fine.
 void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
 
 // A group of outputs that appear together or not at all (see the transactions paragraph above). While

@@ -299,7 +299,7 @@ std::map<std::string, std::vector<uint8_t>> sl1Layers(const fs::path& file) {
     zip_stat_init(&st);
     if (zip_stat_index(zip, static_cast<zip_uint64_t>(i), 0, &st) != 0) continue;
     const std::string name = st.name;
-    if (!name.ends_with(".png")) continue;
+    if (!name.ends_with(".png") || name.starts_with("thumbnail/")) continue;
     std::vector<uint8_t> data(st.size);
     if (zip_file_t* f = zip_fopen_index(zip, static_cast<zip_uint64_t>(i), 0)) {
       zip_fread(f, data.data(), st.size);
@@ -573,11 +573,15 @@ TEST_F(CliToolMasks, Sl1ArchiveAndReportOfTheExamplePart) {
 
   constexpr std::size_t kLayers = 154;  // ceil(7.7 mm / 0.05 mm)
   const auto names = zipEntryNames(readBytes(path("out.sl1")));
-  EXPECT_EQ(names.size(), kLayers + 2);
+  EXPECT_EQ(names.size(), kLayers + 4);
   EXPECT_EQ(std::count(names.begin(), names.end(), "config.ini"), 1);
   EXPECT_EQ(std::count(names.begin(), names.end(), "prusaslicer.ini"), 1);
+  // PrusaSlicer's two thumbnails, then the layers.
+  EXPECT_EQ(std::count(names.begin(), names.end(), "thumbnail/thumbnail400x400.png"), 1);
+  EXPECT_EQ(std::count(names.begin(), names.end(), "thumbnail/thumbnail800x480.png"), 1);
   EXPECT_EQ(
-      std::count_if(names.begin(), names.end(), [](const std::string& n) { return n.ends_with(".png"); }),
+      std::count_if(names.begin(), names.end(),
+                    [](const std::string& n) { return n.ends_with(".png") && !n.starts_with("thumbnail/"); }),
       static_cast<std::ptrdiff_t>(kLayers));
 
   const auto lines = splitLines(readBytes(path("r.csv")));
@@ -611,7 +615,7 @@ TEST_F(CliToolMasks, ModelThatDoesNotFitNeedsCrop) {
   const RunResult cropped = run({"slice", examplePart().string(), "--layers", "4", "--masks", "m.sl1",
                                  "--printer", "sl1", "--pixel", "0.001", "--crop"});
   ASSERT_EQ(cropped.code(), 0) << cropped.describe();
-  EXPECT_EQ(zipEntryNames(readBytes(path("m.sl1"))).size(), 4u + 2u);
+  EXPECT_EQ(zipEntryNames(readBytes(path("m.sl1"))).size(), 4u + 2u + 2u);  // layers, ini files, thumbnails
   expectNoTemporaries();
 }
 

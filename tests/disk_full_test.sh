@@ -64,11 +64,9 @@ expect_clean() {
   fi
 }
 
-for masks in x.sl1 x.exr xstack x.vdb; do
-  extra=()
-  [ "$masks" = x.vdb ] || extra=()
+for masks in x.sl1 x.exr xstack x.vdb x.goo x.nanodlp; do
   "$bin" slice "$model" -H 0.05 -o "$normal/r.cli" -o "$normal/r.3mf" --report "$normal/r.csv" \
-    --summary "$normal/s.json" --masks "$full/$masks" --printer sl1 "${extra[@]}" -q 2>"$work/err"
+    --summary "$normal/s.json" --masks "$full/$masks" --printer sl1 -q 2>"$work/err"
   expect_clean "slice with masks $masks on the full disk" $? "$work/err" "$full/$masks"
 done
 

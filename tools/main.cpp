@@ -1,4 +1,4 @@
-// toposlice: the command-line program. Subcommands: info, slice, template (and batch once jobs land).
+// toposlice: the command-line program. Subcommands: info, slice, template, batch, preview.
 // Every failure prints one line "toposlice: error: <reason>" to stderr and exits non-zero.
 #include <CLI/CLI.hpp>
 
@@ -19,6 +19,7 @@
 #include "io/jobs/profile.h"
 #include "io/jobs/template_file.h"
 #include "io/output_file.h"
+#include "io/preview_png.h"
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
 #include "tools/batch_command.h"
@@ -305,6 +306,26 @@ int runTemplate(const std::string& model, const MeshReadOptions& read, const std
   return 0;
 }
 
+// Renders the model as the printer files' previews show it and writes a PNG.
+int runPreview(const std::string& model, const MeshReadOptions& read, const std::string& output,
+               const std::string& size, bool force, bool quiet) {
+  uint32_t width = 0, height = 0;
+  char tail = 0;
+  if (std::sscanf(size.c_str(), "%ux%u%c", &width, &height, &tail) != 2 || width == 0 || height == 0 ||
+      width > 8192 || height > 8192)
+    throw InputError("--size " + size + ": expected WIDTHxHEIGHT in pixels, each 1 to 8192 (e.g. 800x480)");
+  checkNotAnInput(output, {model});
+  OutputTransaction transaction;
+  const FacetSoup soup = readMesh(model, read);
+  const std::vector<uint8_t> png = previewPng(soup.corners, width, height);
+  OutputFile file(output, force);
+  file.write(png.data(), png.size());
+  file.commit();
+  transaction.commit(&interruptRequested());
+  if (!quiet) std::printf("wrote      : %s (%ux%u)\n", output.c_str(), width, height);
+  return 0;
+}
+
 int run(int argc, char** argv) {
   CLI::App app{
       "toposlice: fast slicing for mask-projection 3D printing, reusing topology across layers and models"};
@@ -352,7 +373,8 @@ int run(int argc, char** argv) {
   std::string resolution, origin;
   slice->add_option("--contours", outputs, "Same as -o: contour output (.cli, .svg, .3mf)");
   slice->add_option("--masks", options.masks.output,
-                    "Mask stack: .sl1 (Prusa SL1 zip of PNGs), .exr, .vdb, or a directory of PNGs");
+                    "Mask stack: .sl1 (Prusa SL1 zip of PNGs), .goo (Elegoo), .nanodlp, .exr, .vdb, or a "
+                    "directory of PNGs");
   slice->add_option(
       "--printer", options.masks.printer,
       "Printer preset: " + printerNames() + " (generic-4k has no fixed pixel size: add --pixel)");
@@ -424,11 +446,21 @@ int run(int argc, char** argv) {
   std::string jobPath;
   batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
 
-  for (CLI::App* sub : {info, slice, templ, batch}) addCommon(sub, common);
-  for (CLI::App* sub : {info, slice, templ}) addMeshOptions(sub, common);
+  CLI::App* preview = app.add_subcommand(
+      "preview", "Render the model from above at an angle into a PNG, as printer files show it");
+  std::string previewOut, previewSize = "800x480";
+  bool previewForce = false;
+  preview->add_option("model", model, "Mesh file: STL, PLY, OBJ or 3MF (by content), optionally .gz")
+      ->required();
+  preview->add_option("-o,--output", previewOut, "Picture to write (.png)")->required();
+  preview->add_option("--size", previewSize, "Picture size WIDTHxHEIGHT in pixels (default 800x480)");
+  preview->add_flag("-f,--force", previewForce, "Replace an existing PNG");
+
+  for (CLI::App* sub : {info, slice, templ, batch, preview}) addCommon(sub, common);
+  for (CLI::App* sub : {info, slice, templ, preview}) addMeshOptions(sub, common);
 
   // A first word that is no subcommand (a typo such as "slise") is named, with the nearest command.
-  const std::vector<CLI::App*> commands{info, slice, templ, batch};
+  const std::vector<CLI::App*> commands{info, slice, templ, batch, preview};
   if (argc > 1 && argv[1][0] != '-') {
     const std::string word = argv[1];
     const bool known =
@@ -472,6 +504,8 @@ int run(int argc, char** argv) {
   std::signal(SIGTERM, onSignal);
   auto runCommand = [&]() -> int {
     if (*info) return runInfo(model, meshReadOptions(common));
+    if (*preview)
+      return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
     if (*batch) {
       gInterruptedMessage =

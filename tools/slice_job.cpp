@@ -288,7 +288,7 @@ void checkNotAnInput(const std::filesystem::path& output, const std::vector<std:
 }
 
 std::string maskOutputKinds() {
-  return ".sl1, .sl1s, .exr, .vdb, or a folder of PNGs (a name without an extension)";
+  return ".sl1, .sl1s, .goo, .nanodlp, .exr, .vdb, or a folder of PNGs (a name without an extension)";
 }
 
 void validateSliceOptions(const SliceJobOptions& options) {
@@ -312,7 +312,8 @@ void validateSliceOptions(const SliceJobOptions& options) {
     throw InputError("--origin: expected finite X,Y in mm");
   if (!options.masks.output.empty()) {
     const std::string ext = lowerExtension(options.masks.output);
-    if (!ext.empty() && ext != ".sl1" && ext != ".sl1s" && ext != ".exr" && ext != ".vdb")
+    if (!ext.empty() && ext != ".sl1" && ext != ".sl1s" && ext != ".goo" && ext != ".nanodlp" &&
+        ext != ".exr" && ext != ".vdb")
       throw InputError(options.masks.output.string() + ": toposlice does not write '" + ext +
                        "' masks; it writes " + maskOutputKinds());
   }
@@ -555,7 +556,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     // Archive timestamps come from the model file, so the same input gives the same bytes.
     struct stat info {};
     if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
+    maskJob.previewModel = soup.corners;  // rendered by the sink now, not kept
     maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
+    maskJob.previewModel = {};
   }
   // Light-uniformity map: a grayscale PNG of the display, the size of every mask.
   MaskImage lightMap;

@@ -81,8 +81,8 @@ struct SliceJobResult {
 // extensions. Throws InputError naming the option.
 void validateSliceOptions(const SliceJobOptions& options);
 
-// The mask output extensions toposlice writes, for messages: ".sl1, .sl1s, .exr, .vdb, or a folder of
-// PNGs (a name without an extension)".
+// The mask output extensions toposlice writes, for messages: ".sl1, .sl1s, .goo, .nanodlp, .exr, .vdb, or a
+// folder of PNGs (a name without an extension)".
 std::string maskOutputKinds();
 
 // Throws InputError when `output` is, or resolves to (through links, or as a hard link), one of

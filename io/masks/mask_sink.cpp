@@ -2,11 +2,15 @@
 #include "io/masks/mask_sink.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 
 #include "core/mask_runs.h"
 #include "io/errors.h"
 #include "io/masks/exr_writer.h"
+#include "io/masks/goo_writer.h"
+#include "io/masks/nanodlp_writer.h"
 #include "io/masks/png_directory_writer.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
@@ -37,6 +41,16 @@ void EncodingMaskSink::writeLayer(uint32_t index, double z, const MaskImage& mas
   writeEncodedLayer(index, z, layer_);
 }
 
+std::time_t maskCreationTime(const MaskJob& job) {
+  if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) {
+    char* end = nullptr;
+    errno = 0;
+    const long long v = std::strtoll(epoch, &end, 10);
+    if (errno == 0 && end != epoch && *end == '\0' && v >= 0) return static_cast<std::time_t>(v);
+  }
+  return job.created > 0 ? static_cast<std::time_t>(job.created) : 0;
+}
+
 void checkMaskLayerSize(const MaskImage& mask, const PixelGrid& grid, const std::filesystem::path& output,
                         uint32_t index) {
   if (mask.width != grid.width || mask.height != grid.height ||
@@ -52,6 +66,8 @@ std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const 
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](char c) { return static_cast<char>(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c); });
   if (ext == ".sl1" || ext == ".sl1s") return makeSl1Sink(path, job, overwrite);
+  if (ext == ".goo") return makeGooSink(path, job, overwrite);
+  if (ext == ".nanodlp") return makeNanoDlpSink(path, job, overwrite);
   if (ext == ".exr") return makeExrSink(path, job, overwrite);
   if (ext == ".vdb") return makeVdbSink(path, job, overwrite);
   return makePngDirectorySink(path, job, overwrite);

@@ -18,13 +18,16 @@
 #pragma once
 
 #include <cstdint>
+#include <ctime>
 #include <filesystem>
 #include <memory>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
 
 #include "core/mask_image.h"
+#include "core/mesh.h"
 #include "io/masks/deflate_runs.h"
 #include "io/staged_directory.h"
 
@@ -54,6 +57,20 @@ struct MaskJob {
   // VDB only: one grid per slab of kVdbSlabLayers layers (io/masks/vdb_writer.h) instead of one grid for
   // the whole stack; ignored by the other formats.
   bool vdbSlabs = false;
+  // Platform motion and light for the formats that carry them (GOO, NanoDLP); not modelled by the
+  // slicer yet, so these are the defaults named in docs/FORMATS.md until printer profiles set them.
+  double liftDistance = 5.0;        // mm, every layer after the bottom ones
+  double liftSpeed = 65.0;          // mm/min
+  double bottomLiftDistance = 5.0;  // mm, the bottom (first) layer
+  double bottomLiftSpeed = 65.0;    // mm/min
+  double retractSpeed = 150.0;      // mm/min, back down to the next layer
+  double waitBeforeExposure = 1.0;  // s, resin settling after the retract
+  uint8_t lightPwm = 255;           // UV power 0..255
+  double resinDensity = 1.1;        // g/ml, for the weight of resin (GOO)
+  // The model's facets (3 corners each) for the preview pictures (GOO, SL1 thumbnails, NanoDLP 3d.png).
+  // Read only while makeMaskSink runs: sinks render what they need then and keep no reference.
+  // Empty: the previews show no model.
+  std::span<const Point3f> previewModel;
 };
 
 // One layer as encodeLayer leaves it for writeEncodedLayer.
@@ -61,6 +78,7 @@ struct EncodedMaskLayer {
   std::vector<uint8_t> bytes;      // what the sink stores (a PNG, an EXR file) or, by default, mask runs
   uint32_t crc32 = 0;              // CRC-32 of `bytes` where the sink needs one (zip entries)
   uint32_t width = 0, height = 0;  // the image's size (the runs need it)
+  std::string text;                // per-layer text a sink keeps beside the bytes (NanoDLP's info.json)
 };
 
 // Reusable buffers of encodeLayer, one per thread; each sink uses the parts it needs.
@@ -127,8 +145,9 @@ class LayerFolderSink : public EncodingMaskSink {
   uint32_t next_ = 0;
 };
 
-// Picks the writer by extension (case-insensitive): .sl1/.sl1s -> SL1 archive, .exr -> directory of
-// OpenEXR files, .vdb -> OpenVDB file, anything else -> directory of PNGs. Throws OutputError when the
+// Picks the writer by extension (case-insensitive): .sl1/.sl1s -> SL1 archive, .goo -> Elegoo GOO file,
+// .nanodlp -> NanoDLP plate archive, .exr -> directory of OpenEXR files, .vdb -> OpenVDB file, anything
+// else -> directory of PNGs. Throws OutputError when the
 // output exists and !overwrite or cannot be created.
 std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite);
 
@@ -139,6 +158,10 @@ std::string maskLayerFileName(const std::string& name, uint32_t index, uint32_t 
 std::string maskFilePrefix(const std::string& name);
 // The zero-padded index alone, as in maskLayerFileName.
 std::string maskLayerNumber(uint32_t index, uint32_t layerCount);
+
+// Creation time written into printer files: SOURCE_DATE_EPOCH when set (a number >= 0), else
+// job.created (0 when not positive). Never the clock.
+std::time_t maskCreationTime(const MaskJob& job);
 
 // Throws OutputError naming `output` and layer `index` when `mask` is not width x height of `grid`.
 void checkMaskLayerSize(const MaskImage& mask, const PixelGrid& grid, const std::filesystem::path& output,

@@ -8,25 +8,19 @@
 #include "io/masks/sl1_writer.h"
 
 #include <algorithm>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdlib>
 #include <map>
-#include <optional>
-#include <span>
-#include <system_error>
 #include <vector>
 
-#include <fcntl.h>
-#include <minizip/zip.h>
-#include <sys/stat.h>
-#include <unistd.h>
 #include <zlib.h>
 
 #include "io/errors.h"
 #include "io/masks/mask_png.h"
+#include "io/masks/zip_stream.h"
 #include "io/output_file.h"
+#include "io/preview_png.h"
 
 namespace toposlice {
 namespace {
@@ -69,110 +63,23 @@ double estimatedPrintTime(const MaskJob& job, uint32_t layers) {
 }
 
 std::time_t creationTime(const MaskJob& job) {
-  if (const char* epoch = std::getenv("SOURCE_DATE_EPOCH")) {
-    char* end = nullptr;
-    errno = 0;
-    const long long v = std::strtoll(epoch, &end, 10);
-    if (errno == 0 && end != epoch && *end == '\0' && v >= 0) return static_cast<std::time_t>(v);
-  }
   constexpr std::time_t kZipEpoch = 315532800;  // 1980-01-01 00:00:00 UTC, the earliest zip time
-  return job.created > kZipEpoch ? static_cast<std::time_t>(job.created) : kZipEpoch;
-}
-
-uint32_t getLE32(const uint8_t* p) {
-  return uint32_t{p[0]} | uint32_t{p[1]} << 8 | uint32_t{p[2]} << 16 | uint32_t{p[3]} << 24;
-}
-
-void putLE(uint8_t* p, uint64_t v, int bytes) {
-  for (int i = 0; i < bytes; ++i) p[i] = static_cast<uint8_t>(v >> (8 * i));
-}
-
-// minizip 1.1 as shipped by Debian 12 writes the Zip64 end records only past 4 GiB; with 65,535 entries
-// or more it writes 0xFFFF counts into the classic end record and no Zip64 record, which strict readers
-// (libzip, unzip, .NET's ZipArchive used by UVtools) reject. This replaces the classic end record by a
-// Zip64 end record, its locator and a classic record pointing to them (APPNOTE 4.3.14-4.3.16). A
-// no-op when minizip already wrote them or the count fits.
-void addZip64EndRecords(const std::filesystem::path& file, uint64_t entries) {
-  if (entries < 0xFFFF) return;
-  const auto fail = [&file](const char* what) {
-    throw OutputError(file.string() + ": " + what + ": " + std::generic_category().message(errno));
-  };
-  const int fd = ::open(file.c_str(), O_RDWR | O_CLOEXEC);
-  if (fd < 0) fail("cannot reopen");
-  struct stat st {};
-  uint8_t end[22 + 20];  // possible Zip64 locator, then the classic end record (no comment)
-  if (::fstat(fd, &st) != 0 || st.st_size < static_cast<off_t>(sizeof end) ||
-      ::pread(fd, end, sizeof end, st.st_size - static_cast<off_t>(sizeof end)) !=
-          static_cast<ssize_t>(sizeof end)) {
-    ::close(fd);
-    fail("cannot read the end record");
-  }
-  const uint8_t* eocd = end + 20;
-  if (getLE32(eocd) != 0x06054b50u || getLE32(end) == 0x07064b50u) {
-    ::close(fd);
-    if (getLE32(eocd) != 0x06054b50u) throw OutputError(file.string() + ": unexpected zip end record");
-    return;  // Zip64 records present
-  }
-  const uint64_t cdSize = getLE32(eocd + 12), cdOffset = getLE32(eocd + 16);
-  const uint64_t zip64At = static_cast<uint64_t>(st.st_size) - 22;
-  uint8_t tail[56 + 20 + 22] = {};
-  uint8_t* z = tail;  // Zip64 end of central directory record
-  putLE(z, 0x06064b50u, 4);
-  putLE(z + 4, 56 - 12, 8);   // size of the rest of the record
-  putLE(z + 12, 45, 2);       // version made by: 4.5 (Zip64)
-  putLE(z + 14, 45, 2);       // version needed
-  putLE(z + 24, entries, 8);  // entries on this disk (disk numbers stay 0)
-  putLE(z + 32, entries, 8);  // entries in total
-  putLE(z + 40, cdSize, 8);
-  putLE(z + 48, cdOffset, 8);
-  uint8_t* l = tail + 56;  // Zip64 end of central directory locator
-  putLE(l, 0x07064b50u, 4);
-  putLE(l + 8, zip64At, 8);
-  putLE(l + 16, 1, 4);     // total number of disks
-  uint8_t* e = tail + 76;  // classic end record, counts deferring to the Zip64 record
-  putLE(e, 0x06054b50u, 4);
-  putLE(e + 8, 0xFFFF, 2);
-  putLE(e + 10, 0xFFFF, 2);
-  putLE(e + 12, cdSize, 4);
-  putLE(e + 16, cdOffset, 4);
-  if (::pwrite(fd, tail, sizeof tail, static_cast<off_t>(zip64At)) != static_cast<ssize_t>(sizeof tail)) {
-    ::close(fd);
-    fail("cannot write the Zip64 end record");
-  }
-  if (::close(fd) != 0) fail("cannot write the Zip64 end record");
-}
-
-std::string errorText(int code) {
-  return code == ZIP_ERRNO ? std::generic_category().message(errno) : "zip error " + std::to_string(code);
+  return std::max(maskCreationTime(job), kZipEpoch);
 }
 
 class Sl1Sink final : public EncodingMaskSink {
  public:
   Sl1Sink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
-      : file_(path, overwrite), job_(job), created_(creationTime(job)) {
+      : file_(path, overwrite), job_(job), created_(creationTime(job)), zip_(file_, created_) {
     if (job.layerCount > kSl1MaxLayers) {
       throw OutputError(path.string() + ": an SL1 archive holds at most " + std::to_string(kSl1MaxLayers) +
                         " layers (5-digit layer names); this job has " + std::to_string(job.layerCount));
     }
-    // minizip writes the temporary through its own handle; file_ owns its name, its removal when
-    // abandoned (signals included) and the final rename. file_ itself never writes a byte.
-    zip_ = zipOpen64(file_.tempPath().c_str(), APPEND_STATUS_CREATE);
-    if (zip_ == nullptr) {
-      throw OutputError(path.string() + ": cannot create " + file_.tempPath().string() + ": " +
-                        std::generic_category().message(errno));
+    job_.previewModel = {};
+    if (!job.previewModel.empty()) {  // PrusaSlicer's two thumbnails, as it names them
+      zip_.add("thumbnail/thumbnail400x400.png", previewPng(job.previewModel, 400, 400));
+      zip_.add("thumbnail/thumbnail800x480.png", previewPng(job.previewModel, 800, 480));
     }
-    std::tm t{};
-    gmtime_r(&created_, &t);
-    info_.tmz_date.tm_sec = static_cast<uInt>(t.tm_sec);
-    info_.tmz_date.tm_min = static_cast<uInt>(t.tm_min);
-    info_.tmz_date.tm_hour = static_cast<uInt>(t.tm_hour);
-    info_.tmz_date.tm_mday = static_cast<uInt>(t.tm_mday);
-    info_.tmz_date.tm_mon = static_cast<uInt>(t.tm_mon);
-    info_.tmz_date.tm_year = static_cast<uInt>(t.tm_year + 1900);
-  }
-
-  ~Sl1Sink() override {
-    if (zip_ != nullptr) zipClose(zip_, nullptr);  // then file_ removes the temporary
   }
 
   // The layer's PNG and its CRC-32: the zip entry is then written raw, without a second pass over it.
@@ -188,7 +95,7 @@ class Sl1Sink final : public EncodingMaskSink {
       throw OutputError(file_.finalPath().string() + ": layer " + std::to_string(index) +
                         " arrived, expected " + std::to_string(next_));
     }
-    addEntry(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), layer.bytes, layer.crc32);
+    zip_.add(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), layer.bytes, layer.crc32);
     ++next_;
   }
 
@@ -197,38 +104,17 @@ class Sl1Sink final : public EncodingMaskSink {
     job.name = job_.name;  // the PNG names already written fix jobDir
     const std::string config = sl1ConfigIni(job, next_, created_);
     const std::string profile = sl1PrusaSlicerIni(job, next_);
-    addEntry("config.ini", {reinterpret_cast<const uint8_t*>(config.data()), config.size()});
-    addEntry("prusaslicer.ini", {reinterpret_cast<const uint8_t*>(profile.data()), profile.size()});
-    const int rc = zipClose(zip_, nullptr);
-    zip_ = nullptr;
-    if (rc != ZIP_OK) throw OutputError(file_.finalPath().string() + ": cannot write: " + errorText(rc));
-    addZip64EndRecords(file_.tempPath(), uint64_t{next_} + 2);
+    zip_.add("config.ini", {reinterpret_cast<const uint8_t*>(config.data()), config.size()});
+    zip_.add("prusaslicer.ini", {reinterpret_cast<const uint8_t*>(profile.data()), profile.size()});
+    zip_.close();
     file_.commit();
   }
 
  private:
-  // With a known CRC-32 the entry is written raw (minizip does not checksum the bytes again).
-  void addEntry(const std::string& name, std::span<const uint8_t> data,
-                std::optional<uint32_t> crc = std::nullopt) {
-    // Stored (method 0), names flagged UTF-8 (general purpose bit 11). Entries are far below 4 GiB, so
-    // no per-entry Zip64 fields; minizip adds them for offsets past 4 GiB.
-    constexpr uLong kUtf8Names = 1u << 11;
-    const int raw = crc ? 1 : 0;
-    int rc =
-        zipOpenNewFileInZip4_64(zip_, name.c_str(), &info_, nullptr, 0, nullptr, 0, nullptr, 0, 0, raw,
-                                -MAX_WBITS, DEF_MEM_LEVEL, Z_DEFAULT_STRATEGY, nullptr, 0, 0, kUtf8Names, 0);
-    if (rc == ZIP_OK) rc = zipWriteInFileInZip(zip_, data.data(), static_cast<unsigned>(data.size()));
-    if (rc == ZIP_OK) rc = crc ? zipCloseFileInZipRaw64(zip_, data.size(), *crc) : zipCloseFileInZip(zip_);
-    if (rc != ZIP_OK) {
-      throw OutputError(file_.finalPath().string() + ": cannot write " + name + ": " + errorText(rc));
-    }
-  }
-
-  OutputFile file_;  // declared first: destroyed last, after the destructor has closed zip_
+  OutputFile file_;  // declared first: destroyed last, after zip_ has closed its handle
   MaskJob job_;
   std::time_t created_;
-  zipFile zip_ = nullptr;
-  zip_fileinfo info_{};
+  ZipStream zip_;
   uint32_t next_ = 0;
 };
 

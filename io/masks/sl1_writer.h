@@ -1,9 +1,11 @@
 // SL1 archive writer: the Prusa SL1/SL1S print file, read by PrusaSlicer (import), UVtools and the
 // printers' firmware (docs/FORMATS.md, "SL1").
 //
-// Layout: a zip holding "<name>00000.png", "<name>00001.png", ... (8-bit grayscale, stored without
-// recompression, exactly the encodeMaskPng bytes), then config.ini and prusaslicer.ini, written at
-// finish() when the layer count and volume are final. Entries are streamed one by one with minizip
+// Layout: a zip holding, when the job has a preview model, PrusaSlicer's thumbnails
+// "thumbnail/thumbnail400x400.png" and "thumbnail/thumbnail800x480.png" (core/preview.h), then
+// "<name>00000.png", "<name>00001.png", ... (8-bit grayscale, stored without recompression, exactly the
+// encodeMaskPng bytes), then config.ini and prusaslicer.ini, written at finish() when the layer count
+// and volume are final. Entries are streamed one by one with minizip
 // (libzip keeps every entry's data until zip_close, so it cannot stream); the archive is written to an
 // OutputFile temporary and renamed at finish(). Memory: one layer plus the zip central directory that
 // minizip must keep until the end (about 80 bytes per layer, 8 MB at 100,000 layers). Past 65,534

@@ -16,7 +16,7 @@
 
 namespace toposlice {
 
-inline constexpr uint32_t kVdbModuleVersion = 3;  // raised whenever VdbModule, MaskJob or MaskSink changes
+inline constexpr uint32_t kVdbModuleVersion = 4;  // raised whenever VdbModule, MaskJob or MaskSink changes
 
 struct VdbModule {
   uint32_t version;

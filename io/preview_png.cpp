@@ -1,0 +1,42 @@
+// RGB PNG encoding of previews with libspng (preview_png.h).
+#include "io/preview_png.h"
+
+#include <spng.h>
+
+#include <cstdlib>
+#include <memory>
+#include <string>
+
+#include "io/errors.h"
+
+namespace toposlice {
+
+void encodeRgbPng(const RgbImage& image, std::vector<uint8_t>& out) {
+  std::unique_ptr<spng_ctx, decltype(&spng_ctx_free)> ctx(spng_ctx_new(SPNG_CTX_ENCODER), &spng_ctx_free);
+  if (!ctx) throw OutputError("preview: cannot start the PNG encoder");
+  spng_ihdr ihdr{};
+  ihdr.width = image.width;
+  ihdr.height = image.height;
+  ihdr.bit_depth = 8;
+  ihdr.color_type = SPNG_COLOR_TYPE_TRUECOLOR;
+  int rc = spng_set_option(ctx.get(), SPNG_ENCODE_TO_BUFFER, 1);
+  if (rc == 0) rc = spng_set_ihdr(ctx.get(), &ihdr);
+  if (rc == 0)
+    rc = spng_encode_image(ctx.get(), image.rgb.data(), image.rgb.size(), SPNG_FMT_PNG, SPNG_ENCODE_FINALIZE);
+  std::size_t size = 0;
+  void* png = rc == 0 ? spng_get_png_buffer(ctx.get(), &size, &rc) : nullptr;
+  if (png == nullptr) throw OutputError(std::string("preview: PNG encoding failed: ") + spng_strerror(rc));
+  const auto* bytes = static_cast<const uint8_t*>(png);
+  out.assign(bytes, bytes + size);
+  std::free(png);
+}
+
+std::vector<uint8_t> previewPng(std::span<const Point3f> corners, uint32_t width, uint32_t height) {
+  RgbImage image;
+  renderPreview(corners, width, height, image);
+  std::vector<uint8_t> png;
+  encodeRgbPng(image, png);
+  return png;
+}
+
+}  // namespace toposlice
