@@ -536,8 +536,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (std::size_t i = 0; i < layer.size(); ++i)
       s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
     if (maskJob.antiAliased) {
-      rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
-      r.area = maskArea(s.mask, maskJob.grid.pixel);
+      uint64_t valueSum = 0;  // maskArea without a pass over the image
+      rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster, &valueSum);
+      r.area = static_cast<double>(valueSum) / 255.0 * maskJob.grid.pixel * maskJob.grid.pixel;
     } else {
       uint64_t lit = 0;
       rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster, &lit);
