@@ -185,6 +185,8 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       const std::span<const Point2d> loop = layer.loopPoints(l);
       if (!allFinite(loop)) continue;
       const std::size_t n = loop.size();
+      std::vector<int32_t>& ids = scratch.loopIds;
+      ids.assign(n, -1);
       for (std::size_t i = 0; i < n; ++i) {
         const Point2d a = loop[i];
         const Point2d b = loop[i + 1 == n ? 0 : i + 1];
@@ -201,7 +203,18 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
         const uint32_t end = v1 >= top ? height : static_cast<uint32_t>(std::ceil(v1));
         if (first >= end) continue;
         const int32_t winding = upward ? -set.sign : set.sign;
-        edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding});
+        ids[i] = static_cast<int32_t>(edges.size());
+        edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
+                                     static_cast<uint32_t>(edges.size()), -1});
+      }
+      // The edge continuing each one upwards: the next edge of the loop for an upward edge, the
+      // previous one for a downward edge, when it runs the same way (else the chain ends there).
+      for (std::size_t i = 0; i < n; ++i) {
+        if (ids[i] < 0) continue;
+        CoverageEdge& e = edges[static_cast<std::size_t>(ids[i])];
+        const bool upward = e.winding == -set.sign;
+        const int32_t other = ids[upward ? (i + 1 == n ? 0 : i + 1) : (i == 0 ? n - 1 : i - 1)];
+        if (other >= 0 && edges[static_cast<std::size_t>(other)].winding == e.winding) e.above = other;
       }
     }
   }
@@ -214,22 +227,23 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
   for (uint32_t k = height; k > 0; --k) start[k] = start[k - 1];
   start[0] = 0;
   scratch.coverageActive.clear();
+  scratch.pieceOfEdge.resize(edges.size());
 }
 
-// Insertion sort by key while nearly sorted, std::sort once the moves exceed a linear budget.
-template <class T, class Key>
-void sortNearlySorted(std::vector<T>& items, Key key) {
+// Insertion sort while nearly sorted, std::sort once the moves exceed a linear budget.
+template <class T, class Less>
+void sortNearlySortedBy(std::vector<T>& items, Less less) {
   const std::size_t n = items.size();
   std::size_t budget = 4 * n + 64;
   for (std::size_t i = 1; i < n; ++i) {
     const T item = items[i];
     std::size_t j = i;
-    while (j > 0 && key(items[j - 1]) > key(item)) {
+    while (j > 0 && less(item, items[j - 1])) {
       items[j] = items[j - 1];
       --j;
       if (--budget == 0) {
         items[j] = item;
-        std::sort(items.begin(), items.end(), [&](const T& p, const T& q) { return key(p) < key(q); });
+        std::sort(items.begin(), items.end(), less);
         return;
       }
     }
@@ -237,13 +251,17 @@ void sortNearlySorted(std::vector<T>& items, Key key) {
   }
 }
 
+template <class T, class Key>
+void sortNearlySorted(std::vector<T>& items, Key key) {
+  sortNearlySortedBy(items, [&](const T& p, const T& q) { return key(p) < key(q); });
+}
+
 // Adds sign * (the part of the row right of the segment from u = ua to u = ub over a height dy) to the
 // row's cells: per pixel i the segment crosses, dy_i * (1 - f) to cell i and dy_i * f to cell i + 1,
 // f the mean position of the segment inside the pixel. The prefix sum of the cells is then the covered
 // area per pixel. u is clipped to [0, width]: left of the grid the whole row is to the right (cell 0),
 // right of it nothing is.
-void addBoundarySegment(double ua, double ub, double dy, uint32_t width, double* cells,
-                        std::vector<CellSpan>& spans) {
+void addBoundarySegment(double ua, double ub, double dy, uint32_t width, double* cells) {
   const double w = static_cast<double>(width);
   double lo = std::min(ua, ub), hi = std::max(ua, ub);
   const double len = hi - lo;
@@ -251,27 +269,23 @@ void addBoundarySegment(double ua, double ub, double dy, uint32_t width, double*
     if (lo >= w) return;
     if (lo <= 0.0) {
       cells[0] += dy;
-      spans.push_back({0, 0});
       return;
     }
     const auto i = static_cast<uint32_t>(lo);
     const double f = lo - i;
     cells[i] += dy * (1.0 - f);
     cells[i + 1] += dy * f;
-    spans.push_back({i, i + 1});
     return;
   }
   const double perU = dy / len;
   if (lo < 0.0) {
     cells[0] += perU * (std::min(hi, 0.0) - lo);
-    spans.push_back({0, 0});
     if (hi <= 0.0) return;
     lo = 0.0;
   }
   if (lo >= w) return;
   hi = std::min(hi, w);
   auto i = static_cast<uint32_t>(lo);
-  const uint32_t first = i;
   for (;;) {
     const double cellLo = static_cast<double>(i);
     const double a = std::max(lo, cellLo), b = std::min(hi, cellLo + 1.0);
@@ -282,7 +296,13 @@ void addBoundarySegment(double ua, double ub, double dy, uint32_t width, double*
     if (cellLo + 1.0 >= hi) break;
     ++i;
   }
-  spans.push_back({first, i + 1});
+}
+
+// Cells touched by addBoundarySegment(ua, ub, ...).
+CellSpan segmentCells(double ua, double ub, uint32_t width) {
+  const double w = static_cast<double>(width);
+  const auto cell = [w](double u) { return u <= 0.0 ? 0u : static_cast<uint32_t>(std::min(u, w)); };
+  return {cell(std::min(ua, ub)), cell(std::max(ua, ub)) + 1};
 }
 
 // Accumulates the boundary of the positive-winding region over the sub-band [ya, yb], whose pieces
@@ -298,10 +318,9 @@ void accumulateBand(std::span<const CoveragePiece> pieces, double dy, uint32_t w
       next += pieces[i].winding;
       ++i;
     } while (i < pieces.size() && pieces[i].um == pieces[group].um);
-    if (winding <= 0 && next > 0) {
-      addBoundarySegment(pieces[group].ua, pieces[group].ub, dy, width, cells, spans);
-    } else if (winding > 0 && next <= 0) {
-      addBoundarySegment(pieces[group].ua, pieces[group].ub, -dy, width, cells, spans);
+    if ((winding <= 0) != (next <= 0)) {
+      addBoundarySegment(pieces[group].ua, pieces[group].ub, next > 0 ? dy : -dy, width, cells);
+      spans.push_back(segmentCells(pieces[group].ua, pieces[group].ub, width));
     }
     winding = next;
   }
@@ -350,6 +369,138 @@ void coverBand(std::span<const CoverageEdge> active, double ya, double yb, uint3
     fillPieces(active, cuts[c], cuts[c + 1], pieces);
     accumulateBand(pieces, cuts[c + 1] - cuts[c], width, cells, scratch.spans);
   }
+}
+
+// A band of a row by sub-bands cut at every vertex inside it (the general path, see rasterize.h).
+void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
+                         RasterScratch& scratch) {
+  std::vector<double>& ys = scratch.bandYs;
+  ys.clear();
+  ys.push_back(ya);
+  for (const CoverageEdge& e : active) {
+    if (e.v0 > ya && e.v0 < yb) ys.push_back(e.v0);
+    if (e.v1 > ya && e.v1 < yb) ys.push_back(e.v1);
+  }
+  ys.push_back(yb);
+  if (ys.size() > 2) {
+    std::sort(ys.begin() + 1, ys.end() - 1);
+    ys.erase(std::unique(ys.begin(), ys.end()), ys.end());
+  }
+  for (std::size_t b = 0; b + 1 < ys.size(); ++b) coverBand(active, ys[b], ys[b + 1], width, scratch);
+}
+
+// One pixel row [y0, y1] (see rasterize.h): the active edges' parts in the row are linked, vertex to
+// vertex, into chains of one winding; the row is cut where a chain starts or ends inside it (local
+// extremes, horizontal edges, touching loops). In each band the chains spanning it are ordered at its
+// bottom; if no two neighbours swap sides (checked at every vertex of either) the boundary is decided
+// once per chain, else the band is cut at every vertex and crossing (coverBandByVertices).
+void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32_t width,
+              RasterScratch& scratch) {
+  std::vector<CoverageRowPiece>& pieces = scratch.rowPieces;
+  std::vector<uint32_t>& starts = scratch.chainStarts;
+  pieces.clear();
+  starts.clear();
+  for (uint32_t k = 0; k < active.size(); ++k) {
+    const CoverageEdge& e = active[k];
+    const double va = std::max(e.v0, y0), vb = std::min(e.v1, y1);
+    if (va > y0) starts.push_back(static_cast<uint32_t>(pieces.size()));
+    scratch.pieceOfEdge[e.id] = static_cast<uint32_t>(pieces.size());
+    pieces.push_back({edgeU(e, va), edgeU(e, vb), va, vb, -1, k, false});
+  }
+  // Link each piece ending inside the row to the piece of the edge continuing it (its loop neighbour).
+  std::vector<double>& cuts = scratch.rowCuts;
+  cuts.clear();
+  cuts.push_back(y0);
+  for (CoverageRowPiece& p : pieces) {
+    if (p.vb >= y1) continue;
+    const int32_t above = active[p.edge].above;
+    if (above >= 0) {
+      const uint32_t q = scratch.pieceOfEdge[static_cast<std::size_t>(above)];
+      if (q < pieces.size() && active[pieces[q].edge].id == static_cast<uint32_t>(above) &&
+          pieces[q].va == p.vb && pieces[q].ua == p.ub) {
+        p.next = static_cast<int32_t>(q);
+        pieces[q].linked = true;
+        continue;
+      }
+    }
+    cuts.push_back(p.vb);  // a chain ends inside the row
+  }
+  for (const uint32_t q : starts)
+    if (!pieces[q].linked) cuts.push_back(pieces[q].va);  // a chain starts inside the row
+  cuts.push_back(y1);
+  if (cuts.size() > 2) {
+    std::sort(cuts.begin() + 1, cuts.end() - 1);
+    cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
+  }
+
+  std::vector<ChainCursor>& live = scratch.chains;
+  double* cells = scratch.cells.data();
+  const double w = static_cast<double>(width);
+  const auto cell = [w](double u) { return u <= 0.0 ? 0u : static_cast<uint32_t>(std::min(u, w)); };
+  const auto uAt = [&](uint32_t k, double y) { return edgeU(active[pieces[k].edge], y); };
+  for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
+    const double ya = cuts[c], yb = cuts[c + 1];
+    live.clear();
+    for (uint32_t k = 0; k < pieces.size(); ++k) {
+      if (pieces[k].linked) continue;  // not a chain head
+      uint32_t first = k;
+      while (pieces[first].vb <= ya && pieces[first].next >= 0)
+        first = static_cast<uint32_t>(pieces[first].next);
+      if (pieces[first].va > ya || pieces[first].vb <= ya) continue;  // the chain does not span the band
+      uint32_t last = first;
+      double lo = std::min(pieces[first].ua, pieces[first].ub),
+             hi = std::max(pieces[first].ua, pieces[first].ub);
+      while (pieces[last].vb < yb && pieces[last].next >= 0) {
+        last = static_cast<uint32_t>(pieces[last].next);
+        lo = std::min({lo, pieces[last].ua, pieces[last].ub});
+        hi = std::max({hi, pieces[last].ua, pieces[last].ub});
+      }
+      if (pieces[last].vb < yb) continue;
+      live.push_back({uAt(first, ya), uAt(last, yb), lo, hi, first});
+    }
+    sortNearlySortedBy(live, [](const ChainCursor& p, const ChainCursor& q) {
+      return p.ua < q.ua || (p.ua == q.ua && p.ub < q.ub);
+    });
+    bool ordered = true;
+    for (std::size_t h = 1; h < live.size() && ordered; ++h) {
+      if (live[h - 1].hi < live[h].lo) continue;  // apart over the whole band
+      uint32_t a = live[h - 1].first, b = live[h].first;
+      for (;;) {
+        const double y = std::min({pieces[a].vb, pieces[b].vb, yb});
+        if (uAt(a, y) > uAt(b, y)) {
+          ordered = false;
+          break;
+        }
+        if (y >= yb) break;
+        if (pieces[a].vb == y) a = static_cast<uint32_t>(pieces[a].next);
+        if (pieces[b].vb == y) b = static_cast<uint32_t>(pieces[b].next);
+      }
+    }
+    if (!ordered) {
+      coverBandByVertices(active, ya, yb, width, scratch);
+      continue;
+    }
+    int32_t winding = 0;
+    for (const ChainCursor& chain : live) {
+      const int32_t next = winding + active[pieces[chain.first].edge].winding;
+      const bool boundary = (winding <= 0) != (next <= 0);
+      winding = next;
+      if (!boundary) continue;
+      const double sign = next > 0 ? 1.0 : -1.0;
+      double lo = chain.ua, hi = lo;
+      for (uint32_t k = chain.first;; k = static_cast<uint32_t>(pieces[k].next)) {
+        const double va = std::max(pieces[k].va, ya), vb = std::min(pieces[k].vb, yb);
+        const double ua = va == pieces[k].va ? pieces[k].ua : uAt(k, va);
+        const double ub = vb == pieces[k].vb ? pieces[k].ub : uAt(k, vb);
+        addBoundarySegment(ua, ub, sign * (vb - va), width, cells);
+        lo = std::min({lo, ua, ub});
+        hi = std::max({hi, ua, ub});
+        if (pieces[k].vb >= yb) break;
+      }
+      scratch.spans.push_back({cell(lo), cell(hi) + 1});
+    }
+  }
+  sortNearlySorted(scratch.spans, [](const CellSpan& s) { return s.begin; });
 }
 
 // Clears `out` for a new layer of `grid`: only the previous image's lit spans when it has extents.
@@ -418,7 +569,6 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   scratch.cells.assign(static_cast<std::size_t>(width) + 2, 0.0);
   double* cells = scratch.cells.data();
   std::vector<CoverageEdge>& active = scratch.coverageActive;
-  std::vector<double>& ys = scratch.bandYs;
   std::vector<CellSpan>& spans = scratch.spans;
   const uint8_t* table = transfer ? transfer->table : nullptr;
   const auto valueOf = [table](double a) {
@@ -428,41 +578,24 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   };
 
   for (uint32_t j = 0; j < height; ++j) {
-    // Active edges: those overlapping row j, sorted by u at the row's middle.
+    // Active edges: those overlapping row j, sorted by u at the row's bottom.
     std::size_t kept = 0;
-    const double mid = j + 0.5;
-    for (std::size_t i = 0; i < active.size(); ++i) {
-      if (active[i].endRow <= j) continue;
-      active[kept] = active[i];
-      active[kept++].x = edgeU(active[i], mid);
-    }
+    for (std::size_t i = 0; i < active.size(); ++i)
+      if (active[i].endRow > j) active[kept++] = active[i];
     active.resize(kept);
-    for (uint32_t b = scratch.coverageRowStart[j]; b < scratch.coverageRowStart[j + 1]; ++b) {
-      active.push_back(scratch.coverageBucketed[b]);
-      active.back().x = edgeU(active.back(), mid);
-    }
+    active.insert(active.end(), scratch.coverageBucketed.begin() + scratch.coverageRowStart[j],
+                  scratch.coverageBucketed.begin() + scratch.coverageRowStart[j + 1]);
     if (active.empty()) continue;
+    // Sorted by u at the row's bottom (nearly sorted from the row below), so that the chains are too.
+    for (CoverageEdge& e : active) e.x = edgeU(e, j);
     sortNearlySorted(active, [](const CoverageEdge& e) { return e.x; });
 
-    // Sub-bands: the row cut at every vertex inside it.
-    const double y0 = j, y1 = j + 1.0;
-    ys.clear();
-    ys.push_back(y0);
-    for (const CoverageEdge& e : active) {
-      if (e.v0 > y0 && e.v0 < y1) ys.push_back(e.v0);
-      if (e.v1 > y0 && e.v1 < y1) ys.push_back(e.v1);
-    }
-    ys.push_back(y1);
-    if (ys.size() > 2) {
-      std::sort(ys.begin() + 1, ys.end() - 1);
-      ys.erase(std::unique(ys.begin(), ys.end()), ys.end());
-    }
     spans.clear();
-    for (std::size_t b = 0; b + 1 < ys.size(); ++b) coverBand(active, ys[b], ys[b + 1], width, scratch);
+    const double y0 = j, y1 = j + 1.0;
+    coverRow(active, y0, y1, width, scratch);
     if (spans.empty()) continue;
 
     // The row: prefix sums over the touched cells, constant runs between them.
-    sortNearlySorted(spans, [](const CellSpan& s) { return s.begin; });
     const uint32_t r = grid.mirrorY ? height - 1 - j : j;
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     uint32_t lo = width, hi = 0;  // lit extent, unmirrored

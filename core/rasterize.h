@@ -26,11 +26,17 @@
 //   crosses, (signed) dy times the part of the pixel right of it, split over the pixel and its right
 //   neighbour as area and cover (the accumulation of scanline font rasterizers); a prefix sum along the
 //   row then gives every pixel's covered area, so the cost is the edge pixels plus the runs between
-//   them, which are filled, and dark pixels are never touched. Coincident edges of opposite sign (a
-//   removal equal to the model) cancel exactly: edges are interpolated from their lower end and summed.
-//   Rounding rule: value = floor(255 * a + 1/2) with a the computed fraction clamped to [0, 1] (halves
-//   round up). a is exact up to floating-point rounding (relative 1e-12 of a pixel in practice), so a
-//   value differs from the exact area's rounding only when 255 * area is within about 1e-9 of a half.
+//   them, which are filled, and dark pixels are never touched. Fast path (most rows): when the row's
+//   edges link, vertex to vertex, into chains that each run from the row's bottom to its top with one
+//   winding, and neighbouring chains (ordered at the bottom) never swap sides (checked at every vertex
+//   of either), the order is the same at every y of the row: the boundary is decided once per chain
+//   and no sub-bands are needed (chains that touch or coincide are fine: the +1/-1 steps of two
+//   neighbours add up to the step across both). Any other row takes the sub-bands.
+//   Coincident edges of opposite sign (a removal equal to the model) cancel exactly: edges are interpolated
+//   from their lower end and summed. Rounding rule: value = floor(255 * a + 1/2) with a the computed fraction
+//   clamped to [0, 1] (halves round up). a is exact up to floating-point rounding (relative 1e-12 of a pixel
+//   in practice), so a value differs from the exact area's rounding only when 255 * area is within about 1e-9
+//   of a half.
 // Mirroring (grid.mirrorX/mirrorY) is applied when writing: pixel i goes to width-1-i, row j to
 // height-1-j. Contours may extend beyond the grid; they are clipped, never wrapped.
 #pragma once
@@ -56,10 +62,12 @@ struct ContourSet {
 struct CoverageEdge {
   double u0, v0, u1, v1;
   double slope;       // du/dv (0 where it overflows)
-  double x;           // scratch: u at the current row's middle, to keep the active list nearly sorted
+  double x;           // scratch: u at the current row's bottom, to keep the active list nearly sorted
   uint32_t firstRow;  // first pixel row it overlaps
   uint32_t endRow;    // one past the last
   int32_t winding;    // change of the winding count when crossing it left to right
+  uint32_t id;        // index in RasterScratch::coverageEdges
+  int32_t above;      // id of the edge of the same loop that continues it upwards from (u1, v1), or -1
 };
 
 // An edge's span of one sub-band: u at the bottom, middle and top.
@@ -67,6 +75,22 @@ struct CoveragePiece {
   double ua, um, ub;
   uint32_t edge;  // index into the active list
   int32_t winding;
+};
+
+// An edge's part inside the current pixel row (fast path): u at the bottom and top of the part, its
+// y range, the next part of its chain (or -1) and the edge (index into the active list).
+struct CoverageRowPiece {
+  double ua, ub, va, vb;
+  int32_t next;
+  uint32_t edge;
+  bool linked;  // some piece continues into this one
+};
+
+// A chain spanning a band of the row: u at the band's bottom and top, its piece at the bottom.
+struct ChainCursor {
+  double ua, ub;
+  double lo, hi;  // u range of its pieces that meet the band (a superset of its range in the band)
+  uint32_t first;
 };
 
 // Cells [begin, end] of a row touched by one boundary segment.
@@ -98,6 +122,12 @@ struct RasterScratch {
   std::vector<uint32_t> coverageRowStart;      // height + 1 offsets into coverageBucketed
   std::vector<CoverageEdge> coverageActive;    // edges overlapping the current row
   std::vector<CoveragePiece> pieces;           // active edges spanning the current sub-band
+  std::vector<CoverageRowPiece> rowPieces;     // active edges clipped to the current row
+  std::vector<uint32_t> pieceOfEdge;           // row piece of each edge id (valid where it points back)
+  std::vector<int32_t> loopIds;                // edge ids of one loop while the table is built
+  std::vector<uint32_t> chainStarts;           // fast path: pieces starting inside the row, then chain heads
+  std::vector<double> rowCuts;                 // where chains start or end inside the row
+  std::vector<ChainCursor> chains;             // chains spanning the current band
   std::vector<double> bandYs;                  // sub-band limits of the current row
   std::vector<double> cells;                   // area/cover accumulation of the row (width + 2)
   std::vector<CellSpan> spans;                 // cell ranges touched in the row
