@@ -566,6 +566,54 @@ TEST(RasterCoverage, CoincidentRemovalEdgesCancelExactly) {
   }
 }
 
+// The transfer table is applied as values are written (here a threshold at 128), the row hook on each
+// lit row's span; extents and the value sum follow what they leave.
+TEST(RasterCoverage, TransferTableAndRowHook) {
+  const LayerContours layer = makeLayer({circle(3.2, 2.9, 2.1, 300)});
+  const std::vector<ContourSet> sets = {{&layer, 1}};
+  PixelGrid grid = makeGrid(0, 0, 0.1, 70, 60);
+  grid.mirrorX = true;
+  const MaskImage plain = coverage(sets, grid);
+  uint8_t threshold[256];
+  for (int v = 0; v < 256; ++v) threshold[v] = v >= 128 ? 255 : 0;
+  CoverageTransfer transfer;
+  transfer.table = threshold;
+  RasterScratch scratch;
+  MaskImage m;
+  uint64_t sum = 0;
+  rasterizeCoverage(sets, grid, m, scratch, &sum, &transfer);
+  uint64_t expectedSum = 0;
+  for (std::size_t p = 0; p < m.pixels.size(); ++p) {
+    ASSERT_EQ(m.pixels[p], threshold[plain.pixels[p]]) << p;
+    expectedSum += m.pixels[p];
+  }
+  EXPECT_EQ(sum, expectedSum);
+  // A hook that darkens the first lit pixel of every row: the extent starts one later (or further).
+  transfer.table = nullptr;
+  transfer.row = [](void* context, uint32_t, uint32_t begin, uint32_t, uint8_t* row) {
+    ++*static_cast<int*>(context);
+    row[begin] = 0;
+  };
+  int calls = 0;
+  transfer.context = &calls;
+  rasterizeCoverage(sets, grid, m, scratch, &sum, &transfer);
+  uint64_t litRows = 0;
+  expectedSum = 0;
+  for (uint32_t r = 0; r < grid.height; ++r) {
+    if (plain.litBegin[r] >= plain.litEnd[r]) continue;
+    ++litRows;
+    const uint8_t* row = m.pixels.data() + std::size_t{r} * grid.width;
+    EXPECT_EQ(row[plain.litBegin[r]], 0) << r;
+    EXPECT_GT(m.litBegin[r], plain.litBegin[r]) << r;
+    if (m.litBegin[r] < m.litEnd[r]) {
+      EXPECT_NE(row[m.litBegin[r]], 0) << r;
+    }
+    for (uint32_t i = 0; i < grid.width; ++i) expectedSum += row[i];
+  }
+  EXPECT_EQ(static_cast<uint64_t>(calls), litRows);
+  EXPECT_EQ(sum, expectedSum);
+}
+
 TEST(RasterCoverage, PixelAlignedShapesMatchBinary) {
   const LayerContours layer = makeLayer({rect(2, 3, 7, 9), reversed(rect(4, 5, 5, 6))});
   const LayerContours removal = makeLayer({rect(6, 0, 8, 4)});
