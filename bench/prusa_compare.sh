@@ -14,6 +14,8 @@
 #       PRUSA_ORIENTATION, PRUSA_MIRROR_X, PRUSA_MIRROR_Y
 #                      PrusaSlicer's display settings (default: the Original Prusa SL1 preset: portrait, 1, 0)
 #       THREADS        toposlice --threads (default: all cores; PrusaSlicer always uses all cores)
+#       ANTIALIAS=1    anti-aliased masks on both sides: PrusaSlicer --gamma-correction 1 (AGG coverage,
+#                      no gamma), toposlice --antialias (exact coverage); compare the sums of pixel values
 #
 # How the two are made to mean the same thing by pixel (i, j) and layer k:
 # - Printer: PrusaSlicer gets the Original Prusa SL1 preset's printer settings (bed 1.48..119.48 x
@@ -111,11 +113,14 @@ display_mirror_y = $mirror_y
 max_print_height = 150
 printer_correction = 1,1,1
 EOF
+antialias=${ANTIALIAS:-0}
+gamma=0
+[ "$antialias" = 1 ] && gamma=1
 prusa_out=$work/prusaslicer.sl1
 topo_out=$work/toposlice.sl1
 rm -f "$prusa_out" "$topo_out"
 prusa_cmd=(prusa-slicer --export-sla --load "$work/sl1_printer.ini" --layer-height "$h" --initial-layer-height "$h"
-  --gamma-correction 0 --slice-closing-radius 0 --no-supports-enable --no-pad-enable --no-hollowing-enable
+  --gamma-correction "$gamma" --slice-closing-radius 0 --no-supports-enable --no-pad-enable --no-hollowing-enable
   --center 60.48,34.02 --dont-arrange --loglevel 1 --output "$prusa_out" "$stl")
 
 elapsed_s() {  # "Elapsed (wall clock) time (h:mm:ss or m:ss): 1:02.34" -> seconds
@@ -145,6 +150,7 @@ else
   [ "$mirror_y" = 1 ] && topo_flags+=(--mirror-x)
 fi
 [ -n "${THREADS:-}" ] && topo_flags+=(--threads "$THREADS")
+[ "$antialias" = 1 ] && topo_flags+=(--antialias)
 topo_cmd=("$toposlice" slice "$stl" --layer-height "$h" --layers "$layers" --printer sl1 "${topo_flags[@]}"
   --masks "$topo_out" --quiet)
 load_before_topo=$(uptime)
@@ -166,7 +172,7 @@ read -r amin amed amean < <(awk '/^per-layer agreement/ { print $4, $7, $10 }' "
 ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f", a / b }'; }
 {
   echo
-  echo "## PrusaSlicer vs toposlice: $(basename "$model"), layer height $h mm, SL1 2560 x 1440 at 0.04725 mm, binary masks"
+  echo "## PrusaSlicer vs toposlice: $(basename "$model"), layer height $h mm, SL1 2560 x 1440 at 0.04725 mm, $([ "$antialias" = 1 ] && echo anti-aliased || echo binary) masks"
   echo
   echo "| | PrusaSlicer $(dpkg-query -W -f '${Version}' prusa-slicer 2>/dev/null || echo '?') | toposlice | PrusaSlicer / toposlice |"
   echo "|---|---|---|---|"
@@ -180,6 +186,8 @@ ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f", a / b }'; }
   echo "| layers compared | $compared (PrusaSlicer's layer k with toposlice's layer k) |"
   echo "| per layer: min / median / mean | $amin % / $amed % / $amean % |"
   echo "| overall (all pixels of all layers) | $agree % ($differ pixels differ) |"
+  values=$(awk '/^pixel value sums/ { sub(/^pixel value sums: /, ""); print }' "$work/compare.txt")
+  [ -n "$values" ] && echo "| sums of pixel values (A = toposlice, B = PrusaSlicer) | $values |"
   echo
   echo "- machine: $(nproc) cores, $(awk '/MemTotal/ { printf "%.0f GB", $2 / 1048576 }' /proc/meminfo); load average (1, 5, 15 min) before PrusaSlicer:$(echo "$load_before_prusa" | sed 's/.*load average: */ /'), before toposlice:$(echo "$load_before_topo" | sed 's/.*load average: */ /'), after:$(uptime | sed 's/.*load average: */ /')"
   echo "- PrusaSlicer: ${prusa_cmd[*]}"
