@@ -13,6 +13,11 @@
 namespace toposlice {
 namespace {
 
+// Bands where edges cross are cut at every crossing, found pairwise: exact, but O(edges^2) per band and
+// O(edges^3) per row when most pairs cross. Above this many edges such a band is sampled instead.
+constexpr std::size_t kMaxExactCrossingEdges = 64;
+constexpr double kSampleLinesPerPixel = 16.0;
+
 double samplePosition(double origin, double pitch, uint32_t k) {
   return origin + (static_cast<double>(k) + 0.5) * pitch;
 }
@@ -372,8 +377,39 @@ void coverBand(std::span<const CoverageEdge> active, double ya, double yb, uint3
 }
 
 // A band of a row by sub-bands cut at every vertex inside it (the general path, see rasterize.h).
+// The band [ya, yb] by sample lines (kSampleLinesPerPixel per pixel height, at least one): along each,
+// the solid runs are exact in x and weigh the band's height / lines (the midpoint rule in y). Used where
+// too many edges cross for the exact cuts (see rasterize.h).
+void coverBandBySampling(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
+                         RasterScratch& scratch) {
+  const auto lines = static_cast<uint32_t>(std::max(1.0, std::ceil(kSampleLinesPerPixel * (yb - ya))));
+  const double h = (yb - ya) / lines;
+  std::vector<CoveragePiece>& crossings = scratch.pieces;
+  double* cells = scratch.cells.data();
+  for (uint32_t l = 0; l < lines; ++l) {
+    const double y = ya + (l + 0.5) * h;
+    crossings.clear();
+    for (uint32_t k = 0; k < active.size(); ++k) {
+      const CoverageEdge& e = active[k];
+      if (e.v0 <= y && y < e.v1) {
+        const double u = edgeU(e, y);
+        crossings.push_back({u, u, u, k, e.winding});
+      }
+    }
+    sortNearlySorted(crossings, [](const CoveragePiece& p) { return p.um; });
+    // A run [ua, ub) of height h is a rising boundary at ua and a falling one at ub.
+    accumulateBand(crossings, h, width, cells, scratch.spans);
+  }
+}
+
 void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
                          RasterScratch& scratch) {
+  std::size_t overlapping = 0;
+  for (const CoverageEdge& e : active) overlapping += e.v0 < yb && e.v1 > ya ? 1 : 0;
+  if (overlapping > kMaxExactCrossingEdges) {
+    coverBandBySampling(active, ya, yb, width, scratch);
+    return;
+  }
   std::vector<double>& ys = scratch.bandYs;
   ys.clear();
   ys.push_back(ya);

@@ -446,6 +446,33 @@ TEST(RasterCoverage, RandomOffGridLoopsMatchExactClipping) {
   }
 }
 
+TEST(RasterCoverage, ManyCrossingEdgesAreSampledWithinTheMidpointBound) {
+  // A self-intersecting loop of 400 random vertices: most rows hold far more than 64 crossing edges, so
+  // their crossing bands are sampled (16 lines per pixel, exact in x; rasterize.h) instead of cut at
+  // every crossing. Against exact clipping: the total within 0.1 %, pixels within a few levels on
+  // average; and fast (the exact cuts took seconds at 2000 vertices).
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<double> coord(0.0, 24.0);
+  Loop loop;
+  for (int k = 0; k < 400; ++k) loop.push_back({coord(rng), coord(rng)});
+  const LayerContours layer = makeLayer({loop});
+  const std::vector<ContourSet> sets = {{&layer, 1}};
+  const PixelGrid grid = unitGrid(24, 24);
+  uint64_t sum = 0;
+  MaskImage m;
+  RasterScratch scratch;
+  rasterizeCoverage(sets, grid, m, scratch, &sum);
+  const std::vector<double> area = fixtures::exactCoverage(sets, grid);
+  double exact = 0, absError = 0;
+  for (std::size_t p = 0; p < area.size(); ++p) {
+    exact += 255.0 * area[p];
+    absError += std::abs(m.pixels[p] - 255.0 * area[p]);
+  }
+  EXPECT_GT(exact, 100.0 * 255);
+  EXPECT_NEAR(static_cast<double>(sum), exact, 1e-3 * exact);
+  EXPECT_LT(absError / static_cast<double>(area.size()), 3.0);
+}
+
 // Regular 1000-gon of radius 2 mm at 0.05 mm pixels (about 250 boundary pixels).
 struct CircleCase {
   LayerContours layer = makeLayer({circle(3.013, 2.971, 2.0, 1000)});
