@@ -208,16 +208,17 @@ BENCHMARK(BM_ClosestPointLayer)->Unit(benchmark::kMillisecond);
 // anti-aliased, at 25, 50 and 75 % of the model's height: what every core encodes once per layer.
 struct MaskFixture {
   std::array<std::array<MaskImage, 2>, 3> masks;  // [height 25/50/75 %][binary, anti-aliased]
+  std::array<LayerContours, 3> layers;
+  PixelGrid grid;
 
   MaskFixture() {
     const Fixture& f = fixture();
-    const PixelGrid grid =
-        placeGrid(boundsOf(f.soup.corners), 2560, 1440, 0.04725, std::nullopt, false, false);
+    grid = placeGrid(boundsOf(f.soup.corners), 2560, 1440, 0.04725, std::nullopt, false, false);
     MarchScratch scratch;
     scratch.prepare(f.march.facets.size());
     RasterScratch raster;
-    LayerContours layer;
     for (uint32_t h = 0; h < 3; ++h) {
+      LayerContours& layer = layers[h];
       const auto k = static_cast<uint32_t>(f.planes.size() * (h + 1) / 4);
       ActiveRecords active;
       active.start(f.march, k);
@@ -233,6 +234,26 @@ const MaskFixture& maskFixture() {
   static const MaskFixture f;
   return f;
 }
+
+// One layer rasterized on the SL1 grid into a reused image; args: height (25, 50, 75 %), anti-aliased
+// (0 binary, 1 exact coverage). Items: the layer's contour points.
+void BM_RasterizeLayer(benchmark::State& state) {
+  const MaskFixture& f = maskFixture();
+  const LayerContours& layer = f.layers[state.range(0) / 25 - 1];
+  const ContourSet set{&layer, 1};
+  RasterScratch raster;
+  MaskImage mask;
+  for (auto _ : state) {
+    if (state.range(1) == 0) {
+      rasterizeBinary({&set, 1}, f.grid, mask, raster);
+    } else {
+      rasterizeCoverage({&set, 1}, f.grid, mask, raster);
+    }
+    benchmark::DoNotOptimize(mask.pixels.data());
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(layer.points.size()));
+}
+BENCHMARK(BM_RasterizeLayer)->ArgsProduct({{25, 50, 75}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 // encodeMaskPng of one layer; args: height (25, 50, 75 %), anti-aliased (0, 1), code (0 smallest: the
 // default, dynamic for these layers; 1 fixed). Counter: PNG bytes.

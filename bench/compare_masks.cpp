@@ -10,12 +10,14 @@
 // Prints a summary (layer counts, per-layer agreement min / median / mean, overall agreement, the
 // worst layers, and the offset of the lit pixels' centroid of B from A's in pixels: a grid misplaced by
 // d pixels shows about d there, while two rasterization rules on the same grid leave ~0.01) and, with
-// CSV, one line per layer. Exit status 0 when the comparison ran, 1 on any error.
+// CSV, one line per layer. Also the sums of pixel values of both (for anti-aliased stacks: the covered
+// area in 1/255 pixels), overall and per layer. Exit status 0 when the comparison ran, 1 on any error.
 #include <zip.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -102,6 +104,7 @@ class LayerSource {
 
 struct LayerResult {
   uint64_t pixels = 0, differ = 0, litA = 0, litB = 0, litEither = 0;
+  uint64_t valueA = 0, valueB = 0;  // sums of pixel values (anti-aliased masks: covered area x 255)
   double sumAx = 0, sumAy = 0, sumBx = 0, sumBy = 0;  // lit pixel coordinates in A's frame
   double agreement() const { return pixels ? 1.0 - double(differ) / double(pixels) : 1.0; }
 };
@@ -129,8 +132,11 @@ LayerResult compareLayer(const MaskImage& a, const uint8_t* b) {
     const uint8_t* rowB = b + size_t{j} * w;
     // Branch-free 32-bit sums, so that the loop vectorizes (the sums of i fit: width <= 65,536).
     uint32_t rowLitA = 0, rowLitB = 0, rowDiffer = 0, rowEither = 0, rowSumA = 0, rowSumB = 0;
+    uint32_t rowValueA = 0, rowValueB = 0;  // 255 * 65,536 fits
     for (uint32_t i = 0; i < w; ++i) {
       const uint32_t la = rowA[i] >> 7, lb = rowB[i] >> 7;  // value >= 128
+      rowValueA += rowA[i];
+      rowValueB += rowB[i];
       rowLitA += la;
       rowLitB += lb;
       rowSumA += la * i;
@@ -139,6 +145,8 @@ LayerResult compareLayer(const MaskImage& a, const uint8_t* b) {
       rowEither += la | lb;
     }
     r.differ += rowDiffer;
+    r.valueA += rowValueA;
+    r.valueB += rowValueB;
     r.litEither += rowEither;
     r.sumAx += double(rowSumA);
     r.sumBx += double(rowSumB);
@@ -249,19 +257,20 @@ int run(const Options& o) {
   if (!o.csv.empty()) {
     std::FILE* f = std::fopen(o.csv.c_str(), "w");
     if (!f) throw std::runtime_error(o.csv + ": cannot write");
-    std::fprintf(f, "layer,name_a,name_b,pixels,differ,lit_a,lit_b,agreement\n");
+    std::fprintf(f, "layer,name_a,name_b,pixels,differ,lit_a,lit_b,agreement,value_sum_a,value_sum_b\n");
     for (size_t k = 0; k < n; ++k) {
       const LayerResult& r = results[k];
-      std::fprintf(f, "%zu,%s,%s,%llu,%llu,%llu,%llu,%.9f\n", k, listA.name(k).c_str(),
+      std::fprintf(f, "%zu,%s,%s,%llu,%llu,%llu,%llu,%.9f,%llu,%llu\n", k, listA.name(k).c_str(),
                    listB.name(k + o.firstB).c_str(), static_cast<unsigned long long>(r.pixels),
                    static_cast<unsigned long long>(r.differ), static_cast<unsigned long long>(r.litA),
-                   static_cast<unsigned long long>(r.litB), r.agreement());
+                   static_cast<unsigned long long>(r.litB), r.agreement(),
+                   static_cast<unsigned long long>(r.valueA), static_cast<unsigned long long>(r.valueB));
     }
     if (std::fclose(f) != 0) throw std::runtime_error(o.csv + ": write failed");
   }
 
-  std::vector<double> agreement(n);
-  uint64_t pixels = 0, differ = 0, litA = 0, litB = 0, litEither = 0;
+  std::vector<double> agreement(n), valueRatio;
+  uint64_t pixels = 0, differ = 0, litA = 0, litB = 0, litEither = 0, valueA = 0, valueB = 0;
   double sumAx = 0, sumAy = 0, sumBx = 0, sumBy = 0, mean = 0;
   for (size_t k = 0; k < n; ++k) {
     const LayerResult& r = results[k];
@@ -272,6 +281,9 @@ int run(const Options& o) {
     litA += r.litA;
     litB += r.litB;
     litEither += r.litEither;
+    valueA += r.valueA;
+    valueB += r.valueB;
+    if (r.valueA) valueRatio.push_back(std::abs(double(r.valueB) / double(r.valueA) - 1.0));
     sumAx += r.sumAx;
     sumAy += r.sumAy;
     sumBx += r.sumBx;
@@ -289,6 +301,15 @@ int run(const Options& o) {
   std::printf("lit pixels: A %llu, B %llu; differing / lit in either: %.6f %%\n",
               static_cast<unsigned long long>(litA), static_cast<unsigned long long>(litB),
               litEither ? 100.0 * double(differ) / double(litEither) : 0.0);
+  if (valueA) {
+    std::sort(valueRatio.begin(), valueRatio.end());
+    std::printf(
+        "pixel value sums: A %llu, B %llu; B / A - 1: %+.4f %%; per layer |B / A - 1|: median %.4f %%  "
+        "max %.4f %%\n",
+        static_cast<unsigned long long>(valueA), static_cast<unsigned long long>(valueB),
+        100.0 * (double(valueB) / double(valueA) - 1.0), 100.0 * valueRatio[valueRatio.size() / 2],
+        100.0 * valueRatio.back());
+  }
   if (litA && litB)
     std::printf("lit centroid of B - A (pixels, A's frame): dx %+.4f  dy %+.4f\n",
                 sumBx / double(litB) - sumAx / double(litA), sumBy / double(litB) - sumAy / double(litA));

@@ -17,6 +17,8 @@
 #       CORRECTIONS    printer corrections given to both, by their shared names, e.g.
 #                      "--absolute-correction 0.05 --elefant-foot-compensation 0.2 --relative-correction-x 1.02"
 #                      (PrusaSlicer's option names are toposlice's: see docs/FORMATS.md, "Profile files")
+#       ANTIALIAS=1    anti-aliased masks on both sides: PrusaSlicer --gamma-correction 1 (AGG coverage,
+#                      no gamma), toposlice --antialias (exact coverage); compare the sums of pixel values
 #
 # How the two are made to mean the same thing by pixel (i, j) and layer k:
 # - Printer: PrusaSlicer gets the Original Prusa SL1 preset's printer settings (bed 1.48..119.48 x
@@ -114,11 +116,14 @@ display_mirror_y = $mirror_y
 max_print_height = 150
 printer_correction = 1,1,1
 EOF
+antialias=${ANTIALIAS:-0}
+gamma=0
+[ "$antialias" = 1 ] && gamma=1
 prusa_out=$work/prusaslicer.sl1
 topo_out=$work/toposlice.sl1
 rm -f "$prusa_out" "$topo_out"
 prusa_cmd=(prusa-slicer --export-sla --load "$work/sl1_printer.ini" --layer-height "$h" --initial-layer-height "$h"
-  --gamma-correction 0 --slice-closing-radius 0 --no-supports-enable --no-pad-enable --no-hollowing-enable
+  --gamma-correction "$gamma" --slice-closing-radius 0 --no-supports-enable --no-pad-enable --no-hollowing-enable
   --center 60.48,34.02 --dont-arrange --loglevel 1 ${CORRECTIONS:-} --output "$prusa_out" "$stl")
 
 elapsed_s() {  # "Elapsed (wall clock) time (h:mm:ss or m:ss): 1:02.34" -> seconds
@@ -150,6 +155,7 @@ fi
 [ -n "${THREADS:-}" ] && topo_flags+=(--threads "$THREADS")
 # shellcheck disable=SC2206  # CORRECTIONS is a list of options, split on purpose
 topo_flags+=(${CORRECTIONS:-})
+[ "$antialias" = 1 ] && topo_flags+=(--antialias)
 topo_cmd=("$toposlice" slice "$stl" --layer-height "$h" --layers "$layers" --printer sl1 "${topo_flags[@]}"
   --masks "$topo_out" --quiet)
 load_before_topo=$(uptime)
@@ -171,7 +177,7 @@ read -r amin amed amean < <(awk '/^per-layer agreement/ { print $4, $7, $10 }' "
 ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f", a / b }'; }
 {
   echo
-  echo "## PrusaSlicer vs toposlice: $(basename "$model"), layer height $h mm, SL1 2560 x 1440 at 0.04725 mm, binary masks${CORRECTIONS:+, $CORRECTIONS}"
+  echo "## PrusaSlicer vs toposlice: $(basename "$model"), layer height $h mm, SL1 2560 x 1440 at 0.04725 mm, $([ "$antialias" = 1 ] && echo anti-aliased || echo binary)${CORRECTIONS:+, $CORRECTIONS} masks"
   echo
   echo "| | PrusaSlicer $(dpkg-query -W -f '${Version}' prusa-slicer 2>/dev/null || echo '?') | toposlice | PrusaSlicer / toposlice |"
   echo "|---|---|---|---|"
@@ -186,6 +192,8 @@ ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f", a / b }'; }
   echo "| per layer: min / median / mean | $amin % / $amed % / $amean % |"
   echo "| overall (all pixels of all layers) | $agree % ($differ pixels differ) |"
   echo "| lit pixels summed over layers: toposlice / PrusaSlicer | $(awk -F, 'NR > 1 { a += $6; b += $7 } END { printf "%d / %d (%+.3f %%)", a, b, 100 * (a - b) / b }' "$work/agreement.csv") |"
+  values=$(awk '/^pixel value sums/ { sub(/^pixel value sums: /, ""); print }' "$work/compare.txt")
+  [ -n "$values" ] && echo "| sums of pixel values (A = toposlice, B = PrusaSlicer) | $values |"
   echo
   echo "- machine: $(nproc) cores, $(awk '/MemTotal/ { printf "%.0f GB", $2 / 1048576 }' /proc/meminfo); load average (1, 5, 15 min) before PrusaSlicer:$(echo "$load_before_prusa" | sed 's/.*load average: */ /'), before toposlice:$(echo "$load_before_topo" | sed 's/.*load average: */ /'), after:$(uptime | sed 's/.*load average: */ /')"
   echo "- PrusaSlicer: ${prusa_cmd[*]}"

@@ -27,6 +27,7 @@
 #include "core/rasterize.h"
 #include "io/readers/stl_reader.h"
 #include "parallel/embree_queries.h"
+#include "tests/fixtures/exact_coverage.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"
 
@@ -398,6 +399,69 @@ TEST(MaskOracle, AddOnAndRemovalFeatures) {
   EXPECT_GT(inAddOn, inAddOnAndFemur) << "the add-on should reach outside the femur";
   EXPECT_GT(inRemovalAndFemur, 20u) << "the removal should cut into the femur";
   EXPECT_GT(inRemoval, inRemovalAndFemur) << "the removal should reach outside the femur";
+}
+
+// Anti-aliased masks of real layers against exact polygon clipping (tests/fixtures/exact_coverage.h):
+// every pixel within half a grey level (plus 1e-6) of 255 x the exact covered fraction of the
+// positive-winding region. Femur + box add-on - box removal (winding 2 in the overlap, -1 outside the
+// femur, box edges through femur pixels), and the bunny alone on a fine grid, both mirrored.
+void checkCoverageAgainstClipping(std::span<const std::vector<LayerContours>> stacks,
+                                  std::span<const int> signs, const PixelGrid& grid) {
+  RasterScratch scratch;
+  MaskImage mask;
+  std::size_t partial = 0;
+  for (std::size_t k = 0; k < stacks[0].size(); ++k) {
+    std::vector<ContourSet> sets;
+    for (std::size_t f = 0; f < stacks.size(); ++f) sets.push_back({&stacks[f][k], signs[f]});
+    uint64_t sum = 0;
+    rasterizeCoverage(sets, grid, mask, scratch, &sum);
+    const std::vector<double> area = fixtures::exactCoverage(sets, grid);
+    uint64_t expectedSum = 0;
+    for (uint32_t j = 0; j < grid.height; ++j) {
+      for (uint32_t i = 0; i < grid.width; ++i) {
+        const uint32_t mi = grid.mirrorX ? grid.width - 1 - i : i,
+                       mj = grid.mirrorY ? grid.height - 1 - j : j;
+        const uint8_t v = mask.pixels[std::size_t{mj} * grid.width + mi];
+        const double expected = 255.0 * area[std::size_t{j} * grid.width + i];
+        ASSERT_LE(std::abs(v - expected), 0.5 + 1e-6) << "layer " << k << " pixel " << i << "," << j;
+        partial += v != 0 && v != 255 ? 1 : 0;
+        expectedSum += v;
+      }
+    }
+    ASSERT_EQ(sum, expectedSum) << "layer " << k;
+  }
+  EXPECT_GT(partial, 100u) << "the layers should have edge pixels";
+}
+
+TEST(MaskOracle, AntiAliasedMatchesExactClipping) {
+  const FacetSoup femur = readStl(fixtures::modelPath("knee_femur_ssm_S001.stl"));
+  const BoundingBox b = boundsOf(femur.corners);
+  const float cx = 0.5f * (b.min.x + b.max.x), cy = 0.5f * (b.min.y + b.max.y), height = b.max.z - b.min.z;
+  const FacetSoup addOn =
+      fixtures::box(cx, cy - 8, b.min.z + 0.3f * height, b.max.x + 10, cy + 8, b.min.z + 0.6f * height);
+  const FacetSoup removal =
+      fixtures::box(b.min.x - 10, cy - 6, b.min.z + 0.32f * height, cx - 2, cy + 6, b.min.z + 0.58f * height);
+  const std::vector<double> planes = evenPlanes(b.min.z + 0.34 * height, b.min.z + 0.56 * height, 4);
+  const std::vector<LayerContours> stacks[] = {
+      fixtures::sliceToVector(femur, planes, SliceMethod::SelfReuse),
+      fixtures::sliceToVector(addOn, planes, SliceMethod::SelfReuse),
+      fixtures::sliceToVector(removal, planes, SliceMethod::SelfReuse)};
+  const int signs[] = {1, 1, -1};
+  BoundingBox all = b;
+  all.min.x -= 10;
+  all.max.x += 10;
+  PixelGrid grid = gridAround(all, 0.37);
+  grid.mirrorX = true;
+  checkCoverageAgainstClipping(stacks, signs, grid);
+
+  const FacetSoup bunny = readStl(fixtures::modelPath("bunny_closed.stl"));
+  const BoundingBox bb = boundsOf(bunny.corners);
+  const std::vector<LayerContours> bunnyStack[] = {
+      fixtures::sliceToVector(bunny, evenPlanes(bb.min.z, bb.max.z, 5), SliceMethod::SelfReuse)};
+  const int plus[] = {1};
+  PixelGrid fine = gridAround(bb, 0.0013);
+  fine.mirrorY = true;
+  checkCoverageAgainstClipping(bunnyStack, plus, fine);
 }
 
 }  // namespace

@@ -632,9 +632,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (std::size_t i = 0; i < layer.size(); ++i)
       s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
     if (maskJob.antiAliased) {
-      rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
-      if (gamma) applyTable(s.mask, gammaLut);
-      r.area = maskArea(s.mask, maskJob.grid.pixel);  // the light map dims the light, not the part
+      // Gamma is applied as the values are written (no second pass); the area is taken after gamma and
+      // before the light map, which dims the light, not the part.
+      uint64_t valueSum = 0;  // maskArea without a pass over the image
+      CoverageTransfer transfer;
+      transfer.table = gammaLut.data();
+      rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster, &valueSum, gamma ? &transfer : nullptr);
+      r.area = static_cast<double>(valueSum) / 255.0 * maskJob.grid.pixel * maskJob.grid.pixel;
       if (!lightMap.pixels.empty()) applyLightMap(s.mask, lightMap);
     } else {
       uint64_t lit = 0;
