@@ -20,6 +20,7 @@
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
 #include "tools/batch_command.h"
+#include "tools/plate_job.h"
 #include "tools/progress_bar.h"
 #include "tools/slice_job.h"
 
@@ -356,11 +357,15 @@ int run(int argc, char** argv) {
   std::string jobPath;
   batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
 
-  for (CLI::App* sub : {info, slice, templ, batch}) addCommon(sub, common);
+  CLI::App* plate = app.add_subcommand("plate", "Arrange and slice many parts together on build plates");
+  std::string plateJobPath;
+  plate->add_option("job", plateJobPath, "Plate job (JSON, see docs/FORMATS.md)")->required();
+
+  for (CLI::App* sub : {info, slice, templ, batch, plate}) addCommon(sub, common);
   for (CLI::App* sub : {info, slice, templ}) addMeshOptions(sub, common);
 
   // A first word that is no subcommand (a typo such as "slise") is named, with the nearest command.
-  const std::vector<CLI::App*> commands{info, slice, templ, batch};
+  const std::vector<CLI::App*> commands{info, slice, templ, batch, plate};
   if (argc > 1 && argv[1][0] != '-') {
     const std::string word = argv[1];
     const bool known =
@@ -405,6 +410,7 @@ int run(int argc, char** argv) {
   auto runCommand = [&]() -> int {
     if (*info) return runInfo(model, meshReadOptions(common));
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
+    if (*plate) return runPlateCommand(plateJobPath, common.quiet);
     if (*batch) {
       gInterruptedMessage =
           "interrupted; the variants completed before the signal are kept, the others left nothing behind "

@@ -1,4 +1,5 @@
 #include "tools/slice_job.h"
+#include "tools/slice_stages.h"
 
 #include <sys/resource.h>
 #include <sys/stat.h>
@@ -41,8 +42,10 @@ std::string lowerExtension(const std::filesystem::path& path) {
   return ext;
 }
 
+}  // namespace
+
 std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options,
-                                                           const ContourJob& job, const FacetSoup& mesh,
+                                                           const ContourJob& job, const FacetSoup* mesh,
                                                            std::span<const FacetSoup> features,
                                                            double layerHeight) {
   std::vector<std::unique_ptr<ContourSink>> sinks;
@@ -57,7 +60,7 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
         throw InputError("--svg-layers '" + options.svgLayers + "': " + error);
       sinks.push_back(makeSvgWriter(path, job, std::move(layers), options.overwrite));
     } else if (ext == ".3mf") {
-      sinks.push_back(makeThreeMfWriter(path, job, &mesh, options.overwrite, layerHeight, features));
+      sinks.push_back(makeThreeMfWriter(path, job, mesh, options.overwrite, layerHeight, features));
     } else {
       throw InputError(path.string() + ": unknown contour output type '" + ext +
                        "' (use .cli, .svg or .3mf)");
@@ -66,7 +69,7 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
   return sinks;
 }
 
-void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats = nullptr) {
+void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats) {
   const IndexedMesh mesh = weldCorners(soup.corners);
   table.resize(soup.corners.size());
   const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
@@ -178,17 +181,7 @@ MaskJob makeMaskJob(const MaskOptions& o, const BoundingBox& extent, const std::
   return job;
 }
 
-}  // namespace
-
-// Bounds, signed volume and degenerate facets of a soup, in parallel over fixed blocks of facets whose
-// partial sums are added in block order: the same bits for any thread count.
-struct SoupMeasures {
-  BoundingBox bounds;
-  double volume = 0;
-  uint64_t degenerateFacets = 0;
-};
-
-static SoupMeasures measureSoup(std::span<const Point3f> corners) {
+SoupMeasures measureSoup(std::span<const Point3f> corners) {
   constexpr std::size_t kBlock = 32768;  // facets
   const std::size_t facets = corners.size() / 3, blocks = (facets + kBlock - 1) / kBlock;
   std::vector<Point3f> extremes(2 * blocks);  // each block's bounding-box corners
@@ -215,6 +208,17 @@ static SoupMeasures measureSoup(std::span<const Point3f> corners) {
   m.volume = sum / 6.0;
   for (const uint64_t d : degenerate) m.degenerateFacets += d;
   return m;
+}
+
+double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
+                          RasterScratch& scratch) {
+  if (job.antiAliased) {
+    rasterizeCoverage(sets, job.grid, mask, scratch);
+    return maskArea(mask, job.grid.pixel);
+  }
+  uint64_t lit = 0;
+  rasterizeBinary(sets, job.grid, mask, scratch, &lit);
+  return static_cast<double>(lit) * job.grid.pixel * job.grid.pixel;
 }
 
 std::atomic<bool>& interruptRequested() {
@@ -465,7 +469,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   for (const auto& path : options.add) job.features.push_back({partName(path), PartRole::Add});
   for (const auto& path : options.remove) job.features.push_back({partName(path), PartRole::Remove});
   const bool uniform = options.planes.explicitZ.empty();
-  auto sinks = openContourSinks(options, job, soup, features,
+  auto sinks = openContourSinks(options, job, &soup, features,
                                 uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
 
   // Masks: grid, sink, and per-slot rasterizer state.
@@ -535,14 +539,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     s.sets.clear();
     for (std::size_t i = 0; i < layer.size(); ++i)
       s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
-    if (maskJob.antiAliased) {
-      rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster);
-      r.area = maskArea(s.mask, maskJob.grid.pixel);
-    } else {
-      uint64_t lit = 0;
-      rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster, &lit);
-      r.area = static_cast<double>(lit) * maskJob.grid.pixel * maskJob.grid.pixel;
-    }
+    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster);
     maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
