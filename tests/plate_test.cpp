@@ -25,6 +25,7 @@ namespace {
 using tool_test::CliToolBase;
 using tool_test::readBytes;
 using tool_test::sharedModel;
+using tool_test::toposliceBinary;
 namespace fs = std::filesystem;
 
 const fs::path kCase0 = sharedModel("derived/aligner_upper_case0.stl.gz");
@@ -225,6 +226,39 @@ TEST_F(PlateTest, OtherConnectivityIsRefusedByNameUnlessRebuildIsAllowed) {
   const PlateResult r = runPlateJob(job(allowed), nullptr);
   EXPECT_EQ(r.built, 1u);
   EXPECT_NE(r.parts[0].topology.find("rebuilt"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace toposlice
+
+namespace toposlice {
+namespace {
+
+// The bundled plate example is what the generator makes, and the demo job runs through the program:
+// every part checked against the template, none built, one plate, the picture and report written.
+TEST_F(PlateTest, BundledExampleIsFreshAndTheDemoJobRuns) {
+  const fs::path examples = fs::path(TOPOSLICE_SOURCE_DIR) / "examples";
+  const fs::path generator =
+      toposliceBinary().parent_path().parent_path() / "tests" / "generate_plate_example";
+  ASSERT_TRUE(fs::exists(generator)) << generator;
+  fs::create_directory(dir_ / "fresh");
+  ASSERT_EQ(std::system((generator.string() + " " + (dir_ / "fresh").string()).c_str()), 0);
+  for (const auto& e : fs::directory_iterator(dir_ / "fresh"))
+    EXPECT_EQ(readBytes(e.path()), readBytes(examples / "plate" / e.path().filename()))
+        << e.path().filename() << " differs from a fresh one: run generate_plate_example examples/plate";
+  const tool_test::RunResult r = run({"plate", (examples / "plate_demo.json").string(), "-O", dir_.string()});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_NE(r.out.find("1 plate, 3 parts (3 checked against a template, 0 built)"), std::string::npos)
+      << r.out;
+  for (const char* f :
+       {"plate_demo.sl1", "plate_demo.cli", "plate_demo.svg", "plate_demo.png", "plate_demo_report.json"})
+    EXPECT_TRUE(fs::exists(dir_ / f)) << f;
+  const std::string report = readBytes(dir_ / "plate_demo_report.json");
+  EXPECT_NE(report.find("\"name\": \"named\""), std::string::npos);
+  // Every part starts on the first layer: nothing in the example floats.
+  EXPECT_EQ(report.find("\"first_layer\": 1"), std::string::npos) << report;
+  const std::string cli = readBytes(dir_ / "plate_demo.cli");
+  EXPECT_NE(cli.find("$$LABEL/4,add named_arch_named_label"), std::string::npos);
 }
 
 }  // namespace

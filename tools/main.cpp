@@ -360,6 +360,9 @@ int run(int argc, char** argv) {
   CLI::App* plate = app.add_subcommand("plate", "Arrange and slice many parts together on build plates");
   std::string plateJobPath;
   plate->add_option("job", plateJobPath, "Plate job (JSON, see docs/FORMATS.md)")->required();
+  std::string plateOutputDir;
+  plate->add_option("-O,--output-dir", plateOutputDir,
+                    "Write every output into this folder (file names as in the job)");
 
   for (CLI::App* sub : {info, slice, templ, batch, plate}) addCommon(sub, common);
   for (CLI::App* sub : {info, slice, templ}) addMeshOptions(sub, common);
@@ -410,7 +413,7 @@ int run(int argc, char** argv) {
   auto runCommand = [&]() -> int {
     if (*info) return runInfo(model, meshReadOptions(common));
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
-    if (*plate) return runPlateCommand(plateJobPath, common.quiet);
+    if (*plate) return runPlateCommand(plateJobPath, common.quiet, plateOutputDir);
     if (*batch) {
       gInterruptedMessage =
           "interrupted; the variants completed before the signal are kept, the others left nothing behind "

@@ -548,8 +548,14 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
   return result;
 }
 
-int runPlateCommand(const std::filesystem::path& jobPath, bool quiet) {
-  const PlateJob job = readPlateJob(jobPath);
+int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
+                    const std::filesystem::path& outputDir) {
+  PlateJob job = readPlateJob(jobPath);
+  if (!outputDir.empty()) {
+    for (auto* path : {&job.masks, &job.report, &job.picture})
+      if (!path->empty()) *path = outputDir / path->filename();
+    for (auto& path : job.contours) path = outputDir / path.filename();
+  }
   ThreadLimit threads(job.threads);
   const PlateResult r = runPlateJob(job, nullptr);
   if (quiet) return 0;

@@ -46,7 +46,8 @@ struct PlateResult {
 // plates form one OutputTransaction. Throws InputError or OutputError.
 PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress);
 
-// The command: reads the job, runs it with job.threads, prints the per-part table; returns 0.
-int runPlateCommand(const std::filesystem::path& jobPath, bool quiet);
+// The command: reads the job, runs it with job.threads, prints the per-part table; returns 0. A
+// non-empty `outputDir` puts every output there under its file name (instead of where the job says).
+int runPlateCommand(const std::filesystem::path& jobPath, bool quiet, const std::filesystem::path& outputDir);
 
 }  // namespace toposlice
