@@ -219,12 +219,8 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     EncodedMaskLayer encoded;
     double area = 0;
   };
-  struct SlotState {
-    RasterScratch raster;
-    MaskImage mask;
-    std::vector<ContourSet> sets;
+  struct SlotState : MaskSlotScratch {
     std::vector<LayerResult> layers;
-    MaskEncodeScratch encodeScratch;
     Picture picture;
   };
   std::vector<SlotState> slots(plan.slots);

@@ -502,12 +502,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     double area = 0;
     uint64_t islands = 0;
   };
-  struct SlotState {
-    RasterScratch raster;
-    MaskImage mask;
-    std::vector<ContourSet> sets;
+  struct SlotState : MaskSlotScratch {
     std::vector<LayerResult> layers;
-    MaskEncodeScratch encodeScratch;
   };
   const BandPlan plan = planBands(planes.size(), options.slice);
   std::vector<SlotState> slots(plan.slots);

@@ -49,6 +49,15 @@ struct SoupMeasures {
 };
 SoupMeasures measureSoup(std::span<const Point3f> corners);
 
+// Per-pipeline-slot buffers of the mask stage: the layer's contour sets, the rasterizer's scratch, the
+// mask, and the encoder's scratch (reused from layer to layer).
+struct MaskSlotScratch {
+  RasterScratch raster;
+  MaskImage mask;
+  std::vector<ContourSet> sets;
+  MaskEncodeScratch encodeScratch;
+};
+
 // Rasterizes the sets onto job.grid (binary or anti-aliased as the job says) into `mask`; returns the
 // lit area in mm^2.
 double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
