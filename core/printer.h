@@ -14,10 +14,13 @@ struct PrinterPreset {
   uint32_t width, height;  // pixels
   double pixel;            // mm; 0 = the user must give --pixel
   const char* model;       // SL1 printerModel written into archives
+  double buildHeight = 0;  // mm of z travel; 0: unknown (not checked)
 };
 
 // "sl1" (Prusa SL1: 2560x1440 at 0.04725 mm), "sl1s" (SL1S: 2560x1620 at 0.05 mm),
-// "generic-4k" (3840x2160, pixel from --pixel). Case-insensitive; nullopt for an unknown name.
+// "generic-4k" (3840x2160, pixel from --pixel), "generic-8k" (7680x4320 at 0.043 mm: a 15" 8K
+// monochrome LCD, 330 x 186 mm, as in large-format factory printers such as the Phrozen Sonic Mega 8K;
+// 300 mm of z). Case-insensitive; nullopt for an unknown name.
 std::optional<PrinterPreset> findPrinter(const std::string& name);
 std::string printerNames();  // for help and error texts
 

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# The main job on the bundled example part: install what is missing, build, then slice
-# examples/example_part.stl at 10 um layers into contours (ASCII CLI, SVG, 3MF slice stack, binary CLI)
-# and projector masks (a Prusa SL1 archive with a per-layer report) and print where every output went.
-# Outputs go to ./out (or $OUT_DIR); existing ones are replaced.
+# The main job on data bundled in the repository: install what is missing, build, then slice a build
+# plate of three customized variants of one arch-shaped shell (examples/plate/, one with a label add-on),
+# each checked against the template's table and arranged automatically on one Prusa SL1 plate
+# (examples/plate_demo.json): one SL1 archive of masks, labelled contours (CLI, SVG), a per-part report
+# and a picture of the plate. Outputs go to ./out (or $OUT_DIR); existing ones are replaced.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/install-deps.sh
@@ -10,13 +11,10 @@ cd "$(dirname "$0")/.."
 out=${OUT_DIR:-out}
 mkdir -p "$out"
 bin=build/tools/toposlice
-model=examples/example_part.stl
-"$bin" info "$model"
+"$bin" info examples/plate/arch_template.stl
 echo
-"$bin" slice "$model" --layer-height 0.01 --force \
-  -o "$out/example_part.cli" -o "$out/example_part.svg" --svg-layers 50,200,400,650 \
-  -o "$out/example_part.3mf" --printer sl1 --masks "$out/example_part.sl1" --report "$out/example_part.csv"
-"$bin" slice "$model" --layer-height 0.01 --cli-binary --force --quiet -o "$out/example_part_binary.cli"
-echo "wrote      : $out/example_part_binary.cli"
+"$bin" plate examples/plate_demo.json --output-dir "$out"
 echo
+echo "per-part report : $(cd "$out" && pwd)/plate_demo_report.json"
+echo "plate picture   : $(cd "$out" && pwd)/plate_demo.png"
 echo "outputs are in $(cd "$out" && pwd)"

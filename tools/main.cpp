@@ -23,6 +23,7 @@
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
 #include "tools/batch_command.h"
+#include "tools/plate_job.h"
 #include "tools/progress_bar.h"
 #include "tools/slice_job.h"
 
@@ -456,11 +457,18 @@ int run(int argc, char** argv) {
   preview->add_option("--size", previewSize, "Picture size WIDTHxHEIGHT in pixels (default 800x480)");
   preview->add_flag("-f,--force", previewForce, "Replace an existing PNG");
 
-  for (CLI::App* sub : {info, slice, templ, batch, preview}) addCommon(sub, common);
+  CLI::App* plate = app.add_subcommand("plate", "Arrange and slice many parts together on build plates");
+  std::string plateJobPath;
+  plate->add_option("job", plateJobPath, "Plate job (JSON, see docs/FORMATS.md)")->required();
+  std::string plateOutputDir;
+  plate->add_option("-O,--output-dir", plateOutputDir,
+                    "Write every output into this folder (file names as in the job)");
+
+  for (CLI::App* sub : {info, slice, templ, batch, preview, plate}) addCommon(sub, common);
   for (CLI::App* sub : {info, slice, templ, preview}) addMeshOptions(sub, common);
 
   // A first word that is no subcommand (a typo such as "slise") is named, with the nearest command.
-  const std::vector<CLI::App*> commands{info, slice, templ, batch, preview};
+  const std::vector<CLI::App*> commands{info, slice, templ, batch, preview, plate};
   if (argc > 1 && argv[1][0] != '-') {
     const std::string word = argv[1];
     const bool known =
@@ -507,6 +515,7 @@ int run(int argc, char** argv) {
     if (*preview)
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
+    if (*plate) return runPlateCommand(plateJobPath, common.quiet, plateOutputDir);
     if (*batch) {
       gInterruptedMessage =
           "interrupted; the variants completed before the signal are kept, the others left nothing behind "

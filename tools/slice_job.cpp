@@ -1,4 +1,5 @@
 #include "tools/slice_job.h"
+#include "tools/slice_stages.h"
 
 #include <sys/resource.h>
 #include <sys/stat.h>
@@ -46,8 +47,10 @@ std::string lowerExtension(const std::filesystem::path& path) {
   return ext;
 }
 
+}  // namespace
+
 std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options,
-                                                           const ContourJob& job, const FacetSoup& mesh,
+                                                           const ContourJob& job, const FacetSoup* mesh,
                                                            std::span<const FacetSoup> features,
                                                            double layerHeight) {
   std::vector<std::unique_ptr<ContourSink>> sinks;
@@ -62,7 +65,7 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
         throw InputError("--svg-layers '" + options.svgLayers + "': " + error);
       sinks.push_back(makeSvgWriter(path, job, std::move(layers), options.overwrite));
     } else if (ext == ".3mf") {
-      sinks.push_back(makeThreeMfWriter(path, job, &mesh, options.overwrite, layerHeight, features));
+      sinks.push_back(makeThreeMfWriter(path, job, mesh, options.overwrite, layerHeight, features));
     } else {
       throw InputError(path.string() + ": unknown contour output type '" + ext +
                        "' (use .cli, .svg or .3mf)");
@@ -71,7 +74,7 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
   return sinks;
 }
 
-void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats = nullptr) {
+void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats) {
   const IndexedMesh mesh = weldCorners(soup.corners);
   table.resize(soup.corners.size());
   const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
@@ -190,6 +193,8 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   return job;
 }
 
+namespace {
+
 // The light-uniformity map: an 8-bit grayscale PNG as the display shows it (the masks' own layout and
 // mirroring), exactly the masks' size.
 MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
@@ -208,15 +213,7 @@ MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
 
 }  // namespace
 
-// Bounds, signed volume and degenerate facets of a soup, in parallel over fixed blocks of facets whose
-// partial sums are added in block order: the same bits for any thread count.
-struct SoupMeasures {
-  BoundingBox bounds;
-  double volume = 0;
-  uint64_t degenerateFacets = 0;
-};
-
-static SoupMeasures measureSoup(std::span<const Point3f> corners) {
+SoupMeasures measureSoup(std::span<const Point3f> corners) {
   constexpr std::size_t kBlock = 32768;  // facets
   const std::size_t facets = corners.size() / 3, blocks = (facets + kBlock - 1) / kBlock;
   std::vector<Point3f> extremes(2 * blocks);  // each block's bounding-box corners
@@ -243,6 +240,23 @@ static SoupMeasures measureSoup(std::span<const Point3f> corners) {
   m.volume = sum / 6.0;
   for (const uint64_t d : degenerate) m.degenerateFacets += d;
   return m;
+}
+
+double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
+                          RasterScratch& scratch, const uint8_t* gammaMap, const MaskImage* lightMap) {
+  if (job.antiAliased) {
+    // Gamma is applied as the values are written (no second pass); the area is taken after gamma and
+    // before the light map, which dims the light, not the part.
+    uint64_t valueSum = 0;  // maskArea without a pass over the image
+    CoverageTransfer transfer;
+    transfer.table = gammaMap;
+    rasterizeCoverage(sets, job.grid, mask, scratch, &valueSum, gammaMap != nullptr ? &transfer : nullptr);
+    if (lightMap != nullptr) applyLightMap(mask, *lightMap);
+    return static_cast<double>(valueSum) / 255.0 * job.grid.pixel * job.grid.pixel;
+  }
+  uint64_t lit = 0;
+  rasterizeBinary(sets, job.grid, mask, scratch, &lit);
+  return static_cast<double>(lit) * job.grid.pixel * job.grid.pixel;
 }
 
 std::atomic<bool>& interruptRequested() {
@@ -537,7 +551,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   for (const auto& path : options.add) job.features.push_back({partName(path), PartRole::Add});
   for (const auto& path : options.remove) job.features.push_back({partName(path), PartRole::Remove});
   const bool uniform = options.planes.explicitZ.empty();
-  auto sinks = openContourSinks(options, job, soup, features,
+  auto sinks = openContourSinks(options, job, &soup, features,
                                 uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
 
   // Masks: grid, sink, and per-slot rasterizer state.
@@ -578,12 +592,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     double area = 0;
     uint64_t islands = 0;
   };
-  struct SlotState {
-    RasterScratch raster;
-    MaskImage mask;
-    std::vector<ContourSet> sets;
+  struct SlotState : MaskSlotScratch {
     std::vector<LayerResult> layers;
-    MaskEncodeScratch encodeScratch;
   };
   const BandPlan plan = planBands(planes.size(), options.slice);
   std::vector<SlotState> slots(plan.slots);
@@ -631,20 +641,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     s.sets.clear();
     for (std::size_t i = 0; i < layer.size(); ++i)
       s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
-    if (maskJob.antiAliased) {
-      // Gamma is applied as the values are written (no second pass); the area is taken after gamma and
-      // before the light map, which dims the light, not the part.
-      uint64_t valueSum = 0;  // maskArea without a pass over the image
-      CoverageTransfer transfer;
-      transfer.table = gammaLut.data();
-      rasterizeCoverage(s.sets, maskJob.grid, s.mask, s.raster, &valueSum, gamma ? &transfer : nullptr);
-      r.area = static_cast<double>(valueSum) / 255.0 * maskJob.grid.pixel * maskJob.grid.pixel;
-      if (!lightMap.pixels.empty()) applyLightMap(s.mask, lightMap);
-    } else {
-      uint64_t lit = 0;
-      rasterizeBinary(s.sets, maskJob.grid, s.mask, s.raster, &lit);
-      r.area = static_cast<double>(lit) * maskJob.grid.pixel * maskJob.grid.pixel;
-    }
+    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, gamma ? gammaLut.data() : nullptr,
+                                lightMap.pixels.empty() ? nullptr : &lightMap);
     maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,

@@ -1,0 +1,265 @@
+// Plate jobs (tools/plate_job.h, core/arrange.h): parts sliced together equal the parts sliced alone,
+// arrangement invariants and its baseline, errors before slicing, template reuse, and the program.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+
+#include "core/arrange.h"
+#include "core/mesh_info.h"
+#include "core/weld.h"
+#include "io/errors.h"
+#include "io/jobs/plate_job_file.h"
+#include "io/jobs/template_file.h"
+#include "io/masks/mask_png.h"
+#include "io/masks/mask_sink.h"
+#include "io/readers/mesh_reader.h"
+#include "io/readers/stl_writer.h"
+#include "tests/tool_runner.h"
+#include "tools/plate_job.h"
+#include "tools/slice_job.h"
+
+namespace toposlice {
+namespace {
+
+using tool_test::CliToolBase;
+using tool_test::readBytes;
+using tool_test::sharedModel;
+using tool_test::toposliceBinary;
+namespace fs = std::filesystem;
+
+const fs::path kCase0 = sharedModel("derived/aligner_upper_case0.stl.gz");
+const fs::path kStage2 = sharedModel("derived/aligner_upper_case0_stage2.stl.gz");
+
+const FacetSoup& aligner(int which) {
+  static const FacetSoup a = readMesh(kCase0, {}), b = readMesh(kStage2, {});
+  return which == 0 ? a : b;
+}
+
+std::string q(const fs::path& p) {
+  return "\"" + p.string() + "\"";
+}
+
+class PlateTest : public CliToolBase {
+ public:
+  // The template table of the aligners, written once per test into the work folder.
+  fs::path alignerTable() {
+    const fs::path path = dir_ / "aligner.topo";
+    if (!fs::exists(path))
+      writeTemplateFile(path, buildTemplateTable(weldCorners(aligner(0).corners)), false);
+    return path;
+  }
+  PlateJob job(const std::string& text) { return parsePlateJob(text, dir_, "job.json"); }
+};
+
+MaskImage readPng(const fs::path& path) {
+  const std::string bytes = readBytes(path);
+  MaskImage mask;
+  EXPECT_TRUE(decodeMaskPng({reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size()}, mask)) << path;
+  return mask;
+}
+
+// Every layer of the plate is the union of the parts sliced alone, pixel for pixel, and no pixel is lit
+// by two parts. Part b is turned by 90 degrees on the plate and compared with its mesh turned the same
+// way and sliced alone; placements are whole pixels apart.
+TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
+  const double pixel = 0.05;
+  FacetSoup turned = aligner(1);
+  for (Point3f& p : turned.corners) p = {-p.y, p.x, p.z};  // 90 degrees, exact
+  writeBinaryStl(dir_ / "b_turned.stl", turned, "turned", {});
+  const BoundingBox ba = boundsOf(aligner(0).corners), bb = boundsOf(turned.corners);
+  // x, y: centres of the bounding boxes moved by whole pixels.
+  const auto snap = [&](double centre, double target) {
+    return centre + std::round((target - centre) / pixel) * pixel;
+  };
+  const double ax = snap(0.5 * (ba.min.x + ba.max.x), 36), ay = snap(0.5 * (ba.min.y + ba.max.y), 38);
+  const double bx = snap(0.5 * (bb.min.x + bb.max.x), 100), by = snap(0.5 * (bb.min.y + bb.max.y), 40);
+  char text[2048];
+  std::snprintf(text, sizeof text, R"({"settings": {"layer_height": 0.25, "z0": -3.6, "pixel": 0.05,
+      "resolution": [2600, 1600]},
+    "parts": [{"name": "a", "model": %s, "template": %s, "placement": {"x": %.17g, "y": %.17g}},
+              {"name": "b", "model": %s, "template": %s, "placement": {"x": %.17g, "y": %.17g, "rotation": 90}}],
+    "outputs": {"masks": "plate", "report": "report.json"}})",
+                q(kCase0).c_str(), q(alignerTable()).c_str(), ax, ay, q(kStage2).c_str(),
+                q(alignerTable()).c_str(), bx, by);
+  const PlateResult plate = runPlateJob(job(text), nullptr);
+  ASSERT_EQ(plate.plates, 1u);
+  EXPECT_EQ(plate.templateChecked, 2u);
+  EXPECT_EQ(plate.built, 0u) << "with a table, no weld or adjacency is built";
+  const std::string report = readBytes(dir_ / "report.json");
+  EXPECT_NE(report.find("\"parts_with_weld_and_adjacency_built\": 0"), std::string::npos) << report;
+
+  const fs::path models[2] = {kCase0, dir_ / "b_turned.stl"};
+  for (int p = 0; p < 2; ++p) {
+    SliceJobOptions o;
+    o.planes.layerHeight = 0.25;
+    o.planes.z0 = -3.6;
+    o.masks.output = dir_ / ("alone" + std::to_string(p));
+    o.masks.pixel = pixel;
+    o.masks.resolution = std::pair<uint32_t, uint32_t>{2600, 1600};
+    o.masks.origin = std::pair<double, double>{-plate.parts[p].tx, -plate.parts[p].ty};
+    runSliceJob(models[p], o, nullptr);
+  }
+  uint64_t lit = 0;
+  const auto layerFiles = [](const fs::path& folder) {
+    std::vector<fs::path> files;
+    for (const auto& e : fs::directory_iterator(folder))
+      if (e.path().extension() == ".png") files.push_back(e.path());
+    std::sort(files.begin(), files.end());
+    return files;
+  };
+  const std::vector<fs::path> plateFiles = layerFiles(dir_ / "plate"), aFiles = layerFiles(dir_ / "alone0"),
+                              bFiles = layerFiles(dir_ / "alone1");
+  ASSERT_EQ(plateFiles.size(), plate.layers[0]);
+  ASSERT_EQ(aFiles.size(), plate.layers[0]);
+  ASSERT_EQ(bFiles.size(), plate.layers[0]);
+  for (uint32_t k = 0; k < plate.layers[0]; ++k) {
+    const MaskImage whole = readPng(plateFiles[k]), a = readPng(aFiles[k]), b = readPng(bFiles[k]);
+    ASSERT_EQ(whole.pixels.size(), a.pixels.size());
+    std::size_t differ = 0, shared = 0;
+    for (std::size_t i = 0; i < whole.pixels.size(); ++i) {
+      differ += whole.pixels[i] != std::max(a.pixels[i], b.pixels[i]) ? 1 : 0;
+      shared += a.pixels[i] && b.pixels[i] ? 1 : 0;
+      lit += whole.pixels[i] ? 1 : 0;
+    }
+    EXPECT_EQ(differ, 0u) << "layer " << k;
+    EXPECT_EQ(shared, 0u) << "layer " << k;
+  }
+  EXPECT_GT(lit, 100000u);
+}
+
+ArrangeSettings plate8k() {
+  ArrangeSettings s;
+  s.plateWidth = 7680 * 0.043;
+  s.plateHeight = 4320 * 0.043;
+  s.margin = 5;
+  s.spacing = 2;
+  s.rotationStep = 90;
+  return s;
+}
+
+// No two footprints, each grown by half the spacing, overlap, all lie inside the margin, the result repeats,
+// and it needs no more plates and packs no less densely than shelf packing of bounding boxes.
+TEST(ArrangeTest, AlignersNestBetterThanShelves) {
+  const Footprint fp[2] = {projectFootprint(aligner(0).corners, 0.5),
+                           projectFootprint(aligner(1).corners, 0.5)};
+  const ArrangeSettings s = plate8k();
+  for (const std::size_t n : {12u, 24u, 48u}) {
+    std::vector<ArrangeItem> items(n);
+    for (std::size_t k = 0; k < n; ++k) items[k].footprint = &fp[k % 2];
+    const auto start = std::chrono::steady_clock::now();
+    const Arrangement a = arrangeFootprints(items, s);
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const Arrangement again = arrangeFootprints(items, s);
+    const Arrangement shelf = shelfPackBoxes(items, s);
+    if (n == 48) {
+      EXPECT_LT(seconds, 1.0);
+    }
+    std::vector<CellShape> raw, grown;
+    for (std::size_t k = 0; k < n; ++k) {
+      const ArrangedPart& p = a.parts[k];
+      EXPECT_EQ(p.tx, again.parts[k].tx);
+      EXPECT_EQ(p.ty, again.parts[k].ty);
+      EXPECT_EQ(p.rotation, again.parts[k].rotation);
+      // The arranger moves shapes by whole cells: the same here.
+      const int32_t di = static_cast<int32_t>(std::lround(p.tx / 0.5)),
+                    dj = static_cast<int32_t>(std::lround(p.ty / 0.5));
+      raw.push_back(shiftShape(placeFootprint(*items[k].footprint, p.rotation, 0, 0, 0), di, dj));
+      grown.push_back(
+          shiftShape(placeFootprint(*items[k].footprint, p.rotation, 0, 0, 0.5 * s.spacing), di, dj));
+      const CellShape& r = raw.back();
+      EXPECT_GE(r.minI * 0.5, s.margin - 1e-9);
+      EXPECT_GE(r.j0 * 0.5, s.margin - 1e-9);
+      EXPECT_LE(r.maxI * 0.5, s.plateWidth - s.margin + 1e-9);
+      EXPECT_LE((r.j0 + static_cast<int32_t>(r.rows())) * 0.5, s.plateHeight - s.margin + 1e-9);
+    }
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t j = 0; j < n; ++j)
+        if (i != j && a.parts[i].plate == a.parts[j].plate) {
+          EXPECT_FALSE(shapesOverlap(grown[i], grown[j])) << i << " " << j;
+        }
+    EXPECT_LE(a.plates, shelf.plates) << n;
+    EXPECT_GE(a.density(0), shelf.density(0)) << n;
+    std::printf("%zu parts: %u plates (shelf %u), first plate density %.3f (shelf %.3f), %.3f s\n", n,
+                a.plates, shelf.plates, a.density(0), shelf.density(0), seconds);
+  }
+}
+
+TEST_F(PlateTest, ProblemsWithGivenPlacementsNameTheParts) {
+  const std::string parts = "\"parts\": [{\"name\": \"left\", \"model\": " + q(kCase0) +
+                            ", \"placement\": {\"x\": 60, \"y\": 60}},"
+                            "{\"name\": \"right\", \"model\": " +
+                            q(kStage2) +
+                            ", \"placement\": {\"x\": 90, \"y\": 60}},"
+                            "{\"name\": \"edge\", \"model\": " +
+                            q(kStage2) + ", \"placement\": {\"x\": 10, \"y\": 150}}],";
+  try {
+    runPlateJob(job("{\"printer\": \"generic-8k\", \"settings\": {\"build_height\": 8}," + parts +
+                    "\"outputs\": {\"report\": \"r.json\"}}"),
+                nullptr);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("parts 'left' and 'right' overlap"), std::string::npos) << what;
+    EXPECT_NE(what.find("part 'edge' (x"), std::string::npos) << what;
+    EXPECT_NE(what.find("sticks out of the printable area"), std::string::npos) << what;
+    EXPECT_NE(what.find("part 'left' is 10.886 mm tall, 2.886 mm taller"), std::string::npos) << what;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "r.json"));
+}
+
+TEST_F(PlateTest, OtherConnectivityIsRefusedByNameUnlessRebuildIsAllowed) {
+  const std::string text =
+      "{\"printer\": \"generic-8k\", \"settings\": {\"layer_height\": 0.5%s},"
+      "\"parts\": [{\"name\": \"odd one\", \"model\": " +
+      q(tool_test::examplePart()) + ", \"template\": " + q(alignerTable()) +
+      ", \"placement\": \"auto\"}], \"outputs\": {\"report\": \"r.json\"}}";
+  char refused[4096], allowed[4096];
+  std::snprintf(refused, sizeof refused, text.c_str(), "");
+  std::snprintf(allowed, sizeof allowed, text.c_str(), ", \"allow_rebuild\": true");
+  try {
+    runPlateJob(job(refused), nullptr);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("part 'odd one'"), std::string::npos) << e.what();
+  }
+  const PlateResult r = runPlateJob(job(allowed), nullptr);
+  EXPECT_EQ(r.built, 1u);
+  EXPECT_NE(r.parts[0].topology.find("rebuilt"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace toposlice
+
+namespace toposlice {
+namespace {
+
+// The bundled plate example is what the generator makes, and the demo job runs through the program:
+// every part checked against the template, none built, one plate, the picture and report written.
+TEST_F(PlateTest, BundledExampleIsFreshAndTheDemoJobRuns) {
+  const fs::path examples = fs::path(TOPOSLICE_SOURCE_DIR) / "examples";
+  const fs::path generator =
+      toposliceBinary().parent_path().parent_path() / "tests" / "generate_plate_example";
+  ASSERT_TRUE(fs::exists(generator)) << generator;
+  fs::create_directory(dir_ / "fresh");
+  ASSERT_EQ(std::system((generator.string() + " " + (dir_ / "fresh").string()).c_str()), 0);
+  for (const auto& e : fs::directory_iterator(dir_ / "fresh"))
+    EXPECT_EQ(readBytes(e.path()), readBytes(examples / "plate" / e.path().filename()))
+        << e.path().filename() << " differs from a fresh one: run generate_plate_example examples/plate";
+  const tool_test::RunResult r = run({"plate", (examples / "plate_demo.json").string(), "-O", dir_.string()});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_NE(r.out.find("1 plate, 3 parts (3 checked against a template, 0 built)"), std::string::npos)
+      << r.out;
+  for (const char* f :
+       {"plate_demo.sl1", "plate_demo.cli", "plate_demo.svg", "plate_demo.png", "plate_demo_report.json"})
+    EXPECT_TRUE(fs::exists(dir_ / f)) << f;
+  const std::string report = readBytes(dir_ / "plate_demo_report.json");
+  EXPECT_NE(report.find("\"name\": \"named\""), std::string::npos);
+  // Every part starts on the first layer: nothing in the example floats.
+  EXPECT_EQ(report.find("\"first_layer\": 1"), std::string::npos) << report;
+  const std::string cli = readBytes(dir_ / "plate_demo.cli");
+  EXPECT_NE(cli.find("$$LABEL/4,add named_arch_named_label"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace toposlice

@@ -1,0 +1,578 @@
+#include "tools/plate_job.h"
+
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <stdexcept>
+
+#include <nlohmann/json.hpp>
+
+#include "core/arrange.h"
+#include "core/contours.h"
+#include "core/mesh_info.h"
+#include "core/number_text.h"
+#include "core/printer.h"
+#include "io/errors.h"
+#include "io/masks/mask_png.h"
+#include "io/output_file.h"
+#include "parallel/parallel.h"
+#include "tools/slice_stages.h"
+
+namespace toposlice {
+namespace {
+
+double secondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+std::string mm(double v) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.3f mm", v);
+  return text;
+}
+
+// One part in memory: its meshes (model, add-ons, removals) in the plate's orientation.
+struct LoadedPart {
+  FacetSoup model;
+  std::vector<FacetSoup> features;  // add-ons first, then removals
+  std::vector<int32_t> built;       // its own table when built
+  std::vector<std::vector<int32_t>> featureTables;
+  std::span<const int32_t> adjacency;
+  Footprint footprint;  // model and add-ons, unrotated
+  BoundingBox bounds;   // rotated, before translation; model and add-ons
+};
+
+void rotateSoup(FacetSoup& soup, double degrees) {
+  double c = 1, s = 0;
+  rotationCosSin(degrees, c, s);
+  if (c == 1 && s == 0) return;
+  for (Point3f& p : soup.corners) {
+    const double x = p.x, y = p.y;
+    p.x = static_cast<float>(c * x - s * y);
+    p.y = static_cast<float>(s * x + c * y);
+  }
+}
+
+BoundingBox unite(const BoundingBox& a, const BoundingBox& b) {
+  return {{std::min(a.min.x, b.min.x), std::min(a.min.y, b.min.y), std::min(a.min.z, b.min.z)},
+          {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
+}
+
+BoundingBox partBounds(const LoadedPart& part, std::size_t addCount) {
+  BoundingBox box = boundsOf(part.model.corners);
+  for (std::size_t i = 0; i < addCount; ++i) box = unite(box, boundsOf(part.features[i].corners));
+  return box;
+}
+
+struct PlateGeometry {
+  uint32_t width = 0, height = 0;
+  double pixel = 0, buildHeight = 0;
+  double widthMm() const { return width * pixel; }
+  double heightMm() const { return height * pixel; }
+};
+
+PlateGeometry plateGeometry(const PlateJob& job) {
+  PlateGeometry g;
+  if (!job.printer.empty()) {
+    const auto preset = findPrinter(job.printer);
+    if (!preset) throw InputError("unknown printer '" + job.printer + "' (known: " + printerNames() + ")");
+    g.width = preset->width;
+    g.height = preset->height;
+    g.pixel = preset->pixel;
+    g.buildHeight = preset->buildHeight;
+  }
+  if (job.resolution) g.width = (*job.resolution)[0], g.height = (*job.resolution)[1];
+  if (job.pixel) g.pixel = *job.pixel;
+  if (job.buildHeight) g.buildHeight = *job.buildHeight;
+  if (!(g.pixel > 0))
+    throw InputError("printer '" + job.printer + "' has no fixed pixel size: give settings.pixel (mm)");
+  return g;
+}
+
+// The contours of a layer moved by (tx, ty), into `out` (its capacity reused).
+void translateLayer(const LayerContours& in, double tx, double ty, LayerContours& out) {
+  out = in;
+  for (Point2d& p : out.points) p = {p.x + tx, p.y + ty};
+}
+
+// Picture of the plate: the masks of up to kPictureLayers evenly spaced layers, OR-ed, shrunk by an
+// integer factor to at most kPictureWidth pixels wide.
+constexpr uint32_t kPictureLayers = 100, kPictureWidth = 2048;
+
+struct Picture {
+  uint32_t factor = 1;
+  MaskImage image;
+  void reset(uint32_t width, uint32_t height) {
+    factor = std::max<uint32_t>(1, (width + kPictureWidth - 1) / kPictureWidth);
+    image.width = (width + factor - 1) / factor;
+    image.height = (height + factor - 1) / factor;
+    image.pixels.assign(static_cast<std::size_t>(image.width) * image.height, 0);
+  }
+  void add(const MaskImage& mask) {
+    for (uint32_t j = 0; j < mask.height; ++j) {
+      uint32_t a = 0, b = mask.width;
+      if (mask.hasExtents()) a = mask.litBegin[j], b = mask.litEnd[j];
+      const uint8_t* row = mask.pixels.data() + static_cast<std::size_t>(j) * mask.width;
+      uint8_t* out = image.pixels.data() + static_cast<std::size_t>(j / factor) * image.width;
+      for (uint32_t i = a; i < b; ++i)
+        if (row[i]) out[i / factor] = 255;
+    }
+  }
+  void merge(const Picture& other) {
+    for (std::size_t k = 0; k < image.pixels.size(); ++k) image.pixels[k] |= other.image.pixels[k];
+  }
+};
+
+struct PlateSlice {
+  uint32_t layers = 0;
+  double volumeMl = 0;
+};
+
+// Slices the parts `members` of one plate together and writes its outputs into the transaction.
+PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std::size_t>& members,
+                      std::vector<LoadedPart>& loaded, std::vector<PlatePartResult>& results,
+                      const PlateGeometry& geometry, const ProgressContext* progress) {
+  // Planes: z0 from the job, else the lowest part bottom of this plate.
+  double zmin = INFINITY, zmax = -INFINITY;
+  BoundingBox extent{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+  for (const std::size_t p : members) {
+    extent = unite(extent, results[p].bounds);
+    zmin = std::min<double>(zmin, results[p].bounds.min.z);
+    zmax = std::max<double>(zmax, results[p].bounds.max.z);
+  }
+  PlaneSpec spec;
+  spec.layerHeight = job.layerHeight;
+  spec.z0 = job.z0;
+  std::string error;
+  const std::vector<double> planes = makePlanes(spec, zmin, zmax, error);
+  if (!error.empty())
+    throw InputError(job.sourceFile.string() + ": plate " + std::to_string(plate + 1) + ": " + error);
+
+  // Meshes in plate order: each part's model, add-ons, removals; their sign and owning part.
+  std::vector<SliceMesh> meshes;
+  std::vector<int> signs;
+  std::vector<std::size_t> owner;  // index into members
+  ContourJob contourJob;
+  contourJob.name = job.parts[members[0]].name;
+  contourJob.bounds = extent;
+  contourJob.layerCount = static_cast<uint32_t>(planes.size());
+  for (std::size_t m = 0; m < members.size(); ++m) {
+    const std::size_t p = members[m];
+    LoadedPart& part = loaded[p];
+    const PlatePart& given = job.parts[p];
+    if (m > 0) contourJob.features.push_back({given.name, PartRole::Model});
+    meshes.push_back({part.model.corners, part.adjacency});
+    signs.push_back(1);
+    owner.push_back(m);
+    for (std::size_t f = 0; f < part.features.size(); ++f) {
+      const bool add = f < given.add.size();
+      const std::filesystem::path& file = add ? given.add[f] : given.remove[f - given.add.size()];
+      std::string stem = file.stem().string();
+      if (stem.ends_with(".stl")) stem.resize(stem.size() - 4);
+      contourJob.features.push_back({given.name + "/" + stem, add ? PartRole::Add : PartRole::Remove});
+      meshes.push_back({part.features[f].corners, part.featureTables[f]});
+      signs.push_back(add ? 1 : -1);
+      owner.push_back(m);
+    }
+  }
+
+  SliceJobOptions sinkOptions;
+  sinkOptions.cliBinary = job.cliBinary;
+  sinkOptions.overwrite = job.overwrite;
+  for (const auto& c : job.contours) sinkOptions.outputs.push_back(plateOutputPath(c, plate));
+  auto sinks = openContourSinks(sinkOptions, contourJob, nullptr, {}, job.layerHeight);
+
+  const bool masks = !job.masks.empty();
+  MaskJob maskJob;
+  std::unique_ptr<MaskSink> maskSink;
+  if (masks) {
+    MaskOptions o;
+    o.printer = job.printer;
+    o.pixel = geometry.pixel;
+    o.resolution = std::pair<uint32_t, uint32_t>{geometry.width, geometry.height};
+    o.origin = std::pair<double, double>{0.0, 0.0};
+    o.mirrorX = job.mirrorX.value_or(false);
+    o.mirrorY = job.mirrorY.value_or(false);
+    o.antialias = job.antialias;
+    const std::filesystem::path out = plateOutputPath(job.masks, plate);
+    std::string name = out.stem().string();
+    ProfileChoice choice;  // the printer preset and material: exposure settings for the printer files
+    choice.printer = job.printer;
+    choice.material = job.material;
+    maskJob = makeMaskJob(o, resolvePrintSettings(choice), extent, name, planes);
+    maskJob.layerHeight = job.layerHeight;
+    struct stat info {};
+    if (::stat(job.sourceFile.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
+    maskSink = makeMaskSink(out, maskJob, job.overwrite);
+  }
+
+  SliceSettings settings;
+  if (!job.method.empty()) parseSliceMethod(job.method, settings.method);
+  const BandPlan plan = planBands(planes.size(), settings);
+  const std::size_t partCount = members.size();
+  const uint32_t pictureEvery =
+      std::max<uint32_t>(1, static_cast<uint32_t>((planes.size() + kPictureLayers - 1) / kPictureLayers));
+  struct LayerResult {
+    std::vector<LayerContours> moved;  // every mesh's contours on the plate
+    std::vector<double> partArea;      // per part: signed contour area
+    EncodedMaskLayer encoded;
+    double area = 0;
+  };
+  struct SlotState : MaskSlotScratch {
+    std::vector<LayerResult> layers;
+    Picture picture;
+  };
+  std::vector<SlotState> slots(plan.slots);
+  for (SlotState& s : slots) {
+    s.layers.resize(plan.bandLayers);
+    for (LayerResult& r : s.layers) r.moved.resize(meshes.size()), r.partArea.resize(partCount);
+    if (!job.picture.empty()) s.picture.reset(geometry.width, geometry.height);
+  }
+  std::vector<double> partVolume(partCount, 0.0);
+  double plateArea = 0, volumeMm3 = 0;
+  uint64_t loops = 0;
+
+  LayerStages stages;
+  stages.process = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
+                       uint32_t position) {
+    SlotState& s = slots[slot];
+    LayerResult& r = s.layers[position];
+    std::fill(r.partArea.begin(), r.partArea.end(), 0.0);
+    s.sets.clear();
+    for (std::size_t i = 0; i < layer.size(); ++i) {
+      const PlatePartResult& part = results[members[owner[i]]];
+      translateLayer(layer[i], part.tx, part.ty, r.moved[i]);
+      r.partArea[owner[i]] += signs[i] * layerSignedArea(r.moved[i]);
+      s.sets.push_back({&r.moved[i], signs[i]});
+    }
+    r.area = 0;
+    if (!masks) {
+      for (const double a : r.partArea) r.area += a;
+      return;
+    }
+    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster);
+    if (!job.picture.empty() && (k % pictureEvery == 0 || k + 1 == planes.size())) s.picture.add(s.mask);
+    maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
+  };
+  stages.consume = [&](uint32_t k, std::span<const LayerContours>, std::size_t slot, uint32_t position) {
+    const LayerResult& r = slots[slot].layers[position];
+    for (auto& sink : sinks) sink->writeLayer(k, r.moved);
+    if (maskSink) maskSink->writeEncodedLayer(k, planes[k], r.encoded);
+    for (std::size_t m = 0; m < partCount; ++m) {
+      PlatePartResult& part = results[members[m]];
+      partVolume[m] += r.partArea[m] * job.layerHeight;
+      bool any = false;
+      for (std::size_t i = 0; i < r.moved.size(); ++i)
+        any = any || (owner[i] == m && r.moved[i].loopCount() > 0);
+      if (any) {
+        if (part.firstLayer < 0) part.firstLayer = k;
+        part.lastLayer = k;
+      }
+    }
+    for (const LayerContours& c : r.moved) loops += c.loopCount();
+    volumeMm3 += r.area * job.layerHeight;
+    plateArea = std::max(plateArea, r.area);
+  };
+  ProgressContext context = progress ? *progress : ProgressContext{};
+  context.cancel = &interruptRequested();
+  const SliceStats stats = sliceMeshes(meshes, planes, settings, stages, &context);
+  if (stats.cancelled) throw InputError("interrupted");
+  for (std::size_t m = 0; m < partCount; ++m) {
+    PlatePartResult& part = results[members[m]];
+    part.volumeMl = partVolume[m] / 1000.0;
+    if (part.firstLayer < 0)
+      throw InputError(job.parts[members[m]].model.string() + ": part '" + part.name +
+                       "': no layer of the plate cuts it: nothing to print");
+  }
+  if (masks && !(volumeMm3 > 0))
+    throw InputError(job.sourceFile.string() + ": plate " + std::to_string(plate + 1) +
+                     ": every mask layer is dark: nothing would print");
+  for (auto& sink : sinks) sink->finish();
+  if (maskSink) {
+    maskJob.volumeMl = volumeMm3 / 1000.0;
+    maskSink->finish(maskJob);
+  }
+  if (!job.picture.empty()) {
+    Picture& picture = slots[0].picture;
+    for (std::size_t s = 1; s < slots.size(); ++s) picture.merge(slots[s].picture);
+    std::vector<uint8_t> png;
+    encodeMaskPng(picture.image, png);
+    OutputFile file(plateOutputPath(job.picture, plate), job.overwrite);
+    file.write(png.data(), png.size());
+    file.commit();
+  }
+  return {static_cast<uint32_t>(planes.size()), volumeMm3 / 1000.0};
+}
+
+// Given placements: overlaps (with the spacing), parts outside the printable area, parts taller than
+// the printer. Every problem is listed, each naming its part(s).
+void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
+                     const std::vector<PlatePartResult>& results, const PlateGeometry& g) {
+  std::vector<std::string> problems;
+  std::vector<std::size_t> fixed;
+  std::vector<CellShape> grown;  // each grown by half the spacing
+  for (std::size_t p = 0; p < results.size(); ++p) {
+    const PlatePartResult& r = results[p];
+    const double height = r.bounds.max.z - std::min<double>(job.z0.value_or(r.bounds.min.z), r.bounds.min.z);
+    if (g.buildHeight > 0 && height > g.buildHeight)
+      problems.push_back("part '" + r.name + "' is " + mm(height) + " tall, " + mm(height - g.buildHeight) +
+                         " taller than the printer's build height of " + mm(g.buildHeight));
+    if (r.arranged) continue;
+    const double out =
+        std::max({0.0, -double{r.bounds.min.x}, -double{r.bounds.min.y}, double{r.bounds.max.x} - g.widthMm(),
+                  double{r.bounds.max.y} - g.heightMm()});
+    if (out > 0)
+      problems.push_back("part '" + r.name + "' (x " + mm(r.bounds.min.x) + " .. " + mm(r.bounds.max.x) +
+                         ", y " + mm(r.bounds.min.y) + " .. " + mm(r.bounds.max.y) +
+                         ") sticks out of the printable area (" + mm(g.widthMm()) + " x " + mm(g.heightMm()) +
+                         ") by " + mm(out));
+    fixed.push_back(p);
+    grown.push_back(placeFootprint(loaded[p].footprint, r.placement.rotation, r.tx, r.ty, 0.5 * job.spacing));
+  }
+  for (std::size_t a = 0; a < fixed.size(); ++a)
+    for (std::size_t b = a + 1; b < fixed.size(); ++b)
+      if (shapesOverlap(grown[a], grown[b]))
+        problems.push_back("parts '" + results[fixed[a]].name + "' and '" + results[fixed[b]].name +
+                           "' overlap or are closer than the spacing of " + mm(job.spacing));
+  if (problems.empty()) return;
+  std::string text = job.sourceFile.string() + ": the plate cannot be printed as given:";
+  for (const std::string& p : problems) text += "\n  " + p;
+  throw InputError(text);
+}
+
+}  // namespace
+
+PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
+  const PlateGeometry geometry = plateGeometry(job);
+  PlateResult result;
+  const std::size_t count = job.parts.size();
+  std::vector<std::filesystem::path> inputs{job.sourceFile};
+  for (const PlatePart& p : job.parts) {
+    inputs.push_back(p.model);
+    if (!p.templateFile.empty()) inputs.push_back(p.templateFile);
+    inputs.insert(inputs.end(), p.add.begin(), p.add.end());
+    inputs.insert(inputs.end(), p.remove.begin(), p.remove.end());
+  }
+  std::vector<std::filesystem::path> outputs{job.masks, job.report, job.picture};
+  outputs.insert(outputs.end(), job.contours.begin(), job.contours.end());
+  for (const auto& o : outputs)
+    if (!o.empty()) checkNotAnInput(o, inputs);
+
+  // Read every part (and each distinct template table once), in parallel across parts.
+  auto start = std::chrono::steady_clock::now();
+  std::map<std::filesystem::path, TemplateTable> tables;
+  for (const PlatePart& p : job.parts)
+    if (!p.templateFile.empty() && !tables.count(p.templateFile))
+      tables[p.templateFile] = readTemplateFile(p.templateFile);
+  MeshReadOptions read;
+  read.unitMm = job.unitMm;
+  read.scale = job.scale;
+  std::vector<LoadedPart> loaded(count);
+  std::vector<std::string> errors(count);
+  result.parts.resize(count);
+  const double cell = job.cell;
+  parallelForChunks(count, 1, [&](std::size_t b, std::size_t e) {
+    for (std::size_t p = b; p < e; ++p) {
+      try {
+        const PlatePart& spec = job.parts[p];
+        LoadedPart& part = loaded[p];
+        part.model = readMesh(spec.model, read);
+        for (const auto* list : {&spec.add, &spec.remove})
+          for (const auto& path : *list) part.features.push_back(readMesh(path, read));
+        // The footprint covers the model and its add-ons (a removal never widens it).
+        FacetSoup all = part.model;
+        for (std::size_t f = 0; f < spec.add.size(); ++f)
+          all.corners.insert(all.corners.end(), part.features[f].corners.begin(),
+                             part.features[f].corners.end());
+        part.footprint = projectFootprint(all.corners, cell);
+        // Topology: the template's table after the linear check, or built (weld + adjacency).
+        SliceJobOptions options;
+        if (!job.method.empty()) parseSliceMethod(job.method, options.slice.method);
+        options.rebuildOnMismatch = job.allowRebuild;
+        SliceJobResult topo;
+        const TemplateTable* table = spec.templateFile.empty() ? nullptr : &tables.at(spec.templateFile);
+        part.adjacency = modelTopology(spec.model, part.model, table, options, topo, part.built);
+        part.featureTables.resize(part.features.size());
+        if (options.slice.method == SliceMethod::SelfReuse)
+          for (std::size_t f = 0; f < part.features.size(); ++f)
+            buildTable(part.features[f], part.featureTables[f]);
+        PlatePartResult& r = result.parts[p];
+        r.name = spec.name;
+        r.topology = topo.topology;
+        r.facets = part.model.facetCount();
+      } catch (const std::exception& failure) {
+        errors[p] = failure.what();
+      }
+    }
+  });
+  for (std::size_t p = 0; p < count; ++p)
+    if (!errors[p].empty()) throw InputError("part '" + job.parts[p].name + "': " + errors[p]);
+  for (const PlatePartResult& r : result.parts) {
+    const bool fromTable = r.topology.starts_with("loaded from template");
+    result.templateChecked += fromTable ? 1 : 0;
+    result.built +=
+        r.topology.starts_with("built") || r.topology.find("rebuilt") != std::string::npos ? 1 : 0;
+  }
+  result.readSeconds = secondsSince(start);
+
+  // Arrangement: given placements stay, `auto` parts are nested around them.
+  start = std::chrono::steady_clock::now();
+  std::vector<ArrangeItem> items(count);
+  for (std::size_t p = 0; p < count; ++p) {
+    items[p].footprint = &loaded[p].footprint;
+    const auto& placement = job.parts[p].placement;
+    if (!placement) continue;
+    // tx, ty put the centre of the rotated bounding box at (x, y).
+    FacetSoup rotated = loaded[p].model;
+    rotateSoup(rotated, placement->rotation);
+    LoadedPart probe;
+    probe.model = std::move(rotated);
+    for (std::size_t f = 0; f < job.parts[p].add.size(); ++f) {
+      probe.features.push_back(loaded[p].features[f]);
+      rotateSoup(probe.features.back(), placement->rotation);
+    }
+    const BoundingBox box = partBounds(probe, job.parts[p].add.size());
+    items[p].fixedRotation = placement->rotation;
+    items[p].fixedTx = placement->x - 0.5 * (double{box.min.x} + box.max.x);
+    items[p].fixedTy = placement->y - 0.5 * (double{box.min.y} + box.max.y);
+  }
+  ArrangeSettings arrange;
+  arrange.plateWidth = geometry.widthMm();
+  arrange.plateHeight = geometry.heightMm();
+  arrange.margin = job.margin;
+  arrange.spacing = job.spacing;
+  arrange.rotationStep = job.rotationStep;
+  Arrangement arranged;
+  try {
+    arranged = arrangeFootprints(items, arrange);
+  } catch (const std::invalid_argument& e) {
+    const std::size_t p = std::stoul(e.what());
+    throw InputError(job.sourceFile.string() + ": part '" + job.parts[p].name + "' (footprint " +
+                     formatNumber(loaded[p].footprint.area()) + " mm^2) does not fit an empty " +
+                     mm(arrange.plateWidth) + " x " + mm(arrange.plateHeight) + " plate with a margin of " +
+                     mm(job.margin));
+  }
+  result.arrangeSeconds = secondsSince(start);
+  result.plates = arranged.plates;
+  for (uint32_t p = 0; p < arranged.plates; ++p) result.density.push_back(arranged.density(p));
+
+  // Orientation: meshes turned in place (after the template check, which does not depend on it).
+  for (std::size_t p = 0; p < count; ++p) {
+    PlatePartResult& r = result.parts[p];
+    const ArrangedPart& a = arranged.parts[p];
+    rotateSoup(loaded[p].model, a.rotation);
+    for (FacetSoup& f : loaded[p].features) rotateSoup(f, a.rotation);
+    BoundingBox box = partBounds(loaded[p], job.parts[p].add.size());
+    r.plate = a.plate;
+    r.arranged = !job.parts[p].placement;
+    r.tx = a.tx;
+    r.ty = a.ty;
+    box.min = {static_cast<float>(box.min.x + a.tx), static_cast<float>(box.min.y + a.ty), box.min.z};
+    box.max = {static_cast<float>(box.max.x + a.tx), static_cast<float>(box.max.y + a.ty), box.max.z};
+    r.bounds = box;
+    r.placement = job.parts[p].placement.value_or(PlatePlacement{
+        0.5 * (double{box.min.x} + box.max.x), 0.5 * (double{box.min.y} + box.max.y), a.rotation});
+    r.footprintMm2 = loaded[p].footprint.area();
+  }
+  checkPlacements(job, loaded, result.parts, geometry);
+
+  // Slicing, plate by plate; every output of every plate joins one transaction.
+  start = std::chrono::steady_clock::now();
+  OutputTransaction transaction;
+  for (uint32_t plate = 0; plate < result.plates; ++plate) {
+    std::vector<std::size_t> members;
+    for (std::size_t p = 0; p < count; ++p)
+      if (result.parts[p].plate == plate) members.push_back(p);
+    const PlateSlice s = slicePlate(job, plate, members, loaded, result.parts, geometry, progress);
+    result.layers.push_back(s.layers);
+    result.volumeMl.push_back(s.volumeMl);
+  }
+  result.sliceSeconds = secondsSince(start);
+
+  if (!job.report.empty()) {
+    nlohmann::ordered_json j;
+    j["toposlice"] = TOPOSLICE_VERSION_TEXT;
+    j["job"] = job.sourceFile.string();
+    j["printer"] = job.printer;
+    j["material"] = job.material;
+    j["image"] = {{"width", geometry.width}, {"height", geometry.height}, {"pixel_mm", geometry.pixel}};
+    j["layer_height_mm"] = job.layerHeight;
+    j["template_reuse"] = {{"parts_checked_against_template", result.templateChecked},
+                           {"parts_with_weld_and_adjacency_built", result.built}};
+    nlohmann::ordered_json plates = nlohmann::ordered_json::array();
+    for (uint32_t p = 0; p < result.plates; ++p) {
+      nlohmann::ordered_json outs = nlohmann::ordered_json::array();
+      for (const auto& o : outputs)
+        if (!o.empty() && o != job.report) outs.push_back(plateOutputPath(o, p).string());
+      plates.push_back({{"plate", p + 1},
+                        {"layers", result.layers[p]},
+                        {"density", result.density[p]},
+                        {"volume_ml", result.volumeMl[p]},
+                        {"outputs", outs}});
+    }
+    j["plates"] = plates;
+    nlohmann::ordered_json parts = nlohmann::ordered_json::array();
+    for (const PlatePartResult& r : result.parts) {
+      parts.push_back(
+          {{"name", r.name},
+           {"plate", r.plate + 1},
+           {"placement", {{"x", r.placement.x}, {"y", r.placement.y}, {"rotation", r.placement.rotation}}},
+           {"arranged", r.arranged},
+           {"translation_mm", {r.tx, r.ty}},
+           {"topology", r.topology},
+           {"facets", r.facets},
+           {"volume_ml", r.volumeMl},
+           {"first_layer", r.firstLayer},
+           {"last_layer", r.lastLayer},
+           {"footprint",
+            {{"area_mm2", r.footprintMm2},
+             {"min_mm", {r.bounds.min.x, r.bounds.min.y}},
+             {"max_mm", {r.bounds.max.x, r.bounds.max.y}}}}});
+    }
+    j["parts"] = parts;
+    j["seconds"] = {{"read_and_topology", result.readSeconds},
+                    {"arrange", result.arrangeSeconds},
+                    {"slice_and_write", result.sliceSeconds}};
+    const std::string text = j.dump(2) + "\n";
+    OutputFile file(job.report, job.overwrite);
+    file.write(text.data(), text.size());
+    file.commit();
+  }
+  transaction.commit(&interruptRequested());
+  result.written = transaction.committed();
+  return result;
+}
+
+int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
+                    const std::filesystem::path& outputDir) {
+  PlateJob job = readPlateJob(jobPath);
+  if (!outputDir.empty()) {
+    for (auto* path : {&job.masks, &job.report, &job.picture})
+      if (!path->empty()) *path = outputDir / path->filename();
+    for (auto& path : job.contours) path = outputDir / path.filename();
+  }
+  ThreadLimit threads(job.threads);
+  const PlateResult r = runPlateJob(job, nullptr);
+  if (quiet) return 0;
+  std::printf("%u plate%s, %zu parts (%u checked against a template, %u built)\n", r.plates,
+              r.plates == 1 ? "" : "s", r.parts.size(), r.templateChecked, r.built);
+  for (uint32_t p = 0; p < r.plates; ++p)
+    std::printf("plate %u: %u layers, packing density %.1f %%, %.3f ml\n", p + 1, r.layers[p],
+                100 * r.density[p], r.volumeMl[p]);
+  std::printf("%-20s %5s %9s %9s %7s %9s %7s %7s %10s\n", "part", "plate", "x mm", "y mm", "rot", "volume ml",
+              "first", "last", "footprint");
+  for (const PlatePartResult& p : r.parts)
+    std::printf("%-20s %5u %9.3f %9.3f %7.2f %9.4f %7lld %7lld %7.1f mm2\n", p.name.c_str(), p.plate + 1,
+                p.placement.x, p.placement.y, p.placement.rotation, p.volumeMl,
+                static_cast<long long>(p.firstLayer), static_cast<long long>(p.lastLayer), p.footprintMm2);
+  for (const auto& w : r.written) std::printf("wrote %s\n", w.c_str());
+  std::printf("read+topology %.2f s, arrange %.3f s, slice+write %.2f s\n", r.readSeconds, r.arrangeSeconds,
+              r.sliceSeconds);
+  return 0;
+}
+
+}  // namespace toposlice

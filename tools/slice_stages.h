@@ -1,0 +1,69 @@
+// The pieces of runSliceJob (tools/slice_job.h) that the plate job (tools/plate_job.h) shares: topology,
+// output sinks, the mask grid and rasterizing one layer's contour sets. Defined in slice_job.cpp.
+#pragma once
+
+#include <filesystem>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/rasterize.h"
+#include "io/contours/contour_sink.h"
+#include "io/jobs/profile.h"
+#include "io/masks/mask_sink.h"
+#include "tools/slice_job.h"
+
+namespace toposlice {
+
+// The contour sinks of options.outputs by extension (.cli, .svg, .3mf). `mesh` and `features` are what
+// a .3mf writes as meshes (mesh may be null: slice stacks only). Throws InputError for an unknown type.
+std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions& options,
+                                                           const ContourJob& job, const FacetSoup* mesh,
+                                                           std::span<const FacetSoup> features,
+                                                           double layerHeight);
+
+// Welds `soup` and builds its adjacency into `table` (3 per facet); `stats` receives the edge counts.
+void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats = nullptr);
+
+// The model's adjacency: the template's after the linear check, built (into `built`), or none, as
+// options.slice.method needs. Fills result.topology (and result.edges when built). A variant whose
+// connectivity differs throws InputError naming `model` unless options.rebuildOnMismatch.
+std::span<const int32_t> modelTopology(const std::filesystem::path& model, const FacetSoup& soup,
+                                       const TemplateTable* templateTable, const SliceJobOptions& options,
+                                       SliceJobResult& result, std::vector<int32_t>& built);
+
+// The layer height as given (see slice_job.cpp).
+double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes);
+
+// The mask job for `extent` (grid, printer model, layer count). Throws InputError for a missing image
+// size or pixel, or an extent that does not fit (unless o.crop).
+MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
+                    const std::string& name, const std::vector<double>& planes);
+
+// Bounds, signed volume and degenerate facets of a soup, in parallel over fixed blocks of facets whose
+// partial sums are added in block order: the same bits for any thread count.
+struct SoupMeasures {
+  BoundingBox bounds;
+  double volume = 0;
+  uint64_t degenerateFacets = 0;
+};
+SoupMeasures measureSoup(std::span<const Point3f> corners);
+
+// Per-pipeline-slot buffers of the mask stage: the layer's contour sets, the rasterizer's scratch, the
+// mask, and the encoder's scratch (reused from layer to layer).
+struct MaskSlotScratch {
+  RasterScratch raster;
+  MaskImage mask;
+  std::vector<ContourSet> sets;
+  MaskEncodeScratch encodeScratch;
+};
+
+// Rasterizes the sets onto job.grid (binary or anti-aliased as the job says) into `mask`; returns the
+// lit area in mm^2. Anti-aliased only: `gammaMap` (256 entries) maps the coverage as it is written, and
+// `lightMap` then multiplies the values (the area is taken before it).
+double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
+                          RasterScratch& scratch, const uint8_t* gammaMap = nullptr,
+                          const MaskImage* lightMap = nullptr);
+
+}  // namespace toposlice
