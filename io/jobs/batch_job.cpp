@@ -15,8 +15,8 @@
 
 #include "core/number_text.h"
 #include "io/errors.h"
-#include "io/jobs/profile.h"
 #include "io/jobs/json_reader.h"
+#include "io/jobs/profile.h"
 
 namespace toposlice {
 namespace {
