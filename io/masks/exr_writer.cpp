@@ -183,17 +183,17 @@ class ExrSink final : public LayerFolderSink {
   ExrSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
       : LayerFolderSink(path, job, overwrite, ".exr") {}
 
-  void encodeLayer(uint32_t index, double z, const MaskImage& mask, EncodedMaskLayer& out,
-                   MaskEncodeScratch& scratch) const override {
+ protected:
+  void encodeLayerBytes(uint32_t index, double z, const MaskImage& mask, std::vector<uint8_t>& out,
+                        MaskEncodeScratch& scratch) const override {
     checkMaskLayerSize(mask, job().grid, finalPath(), index);
     try {
-      encodeExrMaskLayer(mask, job(), index, z, out.bytes, scratch);
+      encodeExrMaskLayer(mask, job(), index, z, out, scratch);
     } catch (const OutputError& e) {
       throw OutputError(finalPath().string() + ": " + e.what());
     }
   }
 
- protected:
   std::string layerFileName(uint32_t index) const override {
     return exrLayerFileName(job().name, index, job().layerCount);
   }

@@ -98,12 +98,17 @@ LayerFolderSink::LayerFolderSink(const std::filesystem::path& path, const MaskJo
                                  std::string layerExt)
     : dir_(path, overwrite, std::move(layerExt)), job_(job) {}
 
-void LayerFolderSink::writeEncodedLayer(uint32_t index, double /*z*/, const EncodedMaskLayer& layer) {
+void LayerFolderSink::encodeLayer(uint32_t index, double z, const MaskImage& mask, EncodedMaskLayer& out,
+                                  MaskEncodeScratch& scratch) const {
+  encodeLayerBytes(index, z, mask, out.bytes, scratch);
+  dir_.writeFile(layerFileName(index), out.bytes);  // out keeps the bytes; the in-order stage needs none
+}
+
+void LayerFolderSink::writeEncodedLayer(uint32_t index, double /*z*/, const EncodedMaskLayer& /*layer*/) {
   if (index != next_) {
     throw OutputError(dir_.finalPath().string() + ": layer " + std::to_string(index) + " arrived, expected " +
                       std::to_string(next_));
   }
-  dir_.writeFile(layerFileName(index), layer.bytes);
   ++next_;
 }
 

@@ -124,17 +124,24 @@ class EncodingMaskSink : public MaskSink {
 };
 
 // Base of the sinks that store each layer as a file of its own in a folder (PNG and EXR stacks): the
-// folder is staged (io/staged_directory.h) and committed by finish(); layers are written in order under
-// layerFileName(index). Derived sinks provide encodeLayer and the file name.
+// folder is staged (io/staged_directory.h) and committed by finish(). Each layer's file is encoded and
+// written in encodeLayer, in the caller's parallel stage (files of one folder are independent, so their
+// creation and writing need no order); writeEncodedLayer only checks that every layer came, in order.
+// Derived sinks provide encodeLayerBytes and the file name.
 class LayerFolderSink : public EncodingMaskSink {
  public:
   // layerExt: the extension of the layer files (".png", ".exr"), for StagedDirectory's overwrite check.
   LayerFolderSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite,
                   std::string layerExt);
+  void encodeLayer(uint32_t index, double z, const MaskImage& mask, EncodedMaskLayer& out,
+                   MaskEncodeScratch& scratch) const final;
   void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) final;
   void finish(const MaskJob& finalJob) override;
 
  protected:
+  // The bytes of layer `index`'s file; thread-safe.
+  virtual void encodeLayerBytes(uint32_t index, double z, const MaskImage& mask, std::vector<uint8_t>& out,
+                                MaskEncodeScratch& scratch) const = 0;
   virtual std::string layerFileName(uint32_t index) const = 0;
   const std::filesystem::path& finalPath() const { return dir_.finalPath(); }
   const MaskJob& job() const { return job_; }

@@ -14,13 +14,13 @@ class PngDirectorySink final : public LayerFolderSink {
   PngDirectorySink(const std::filesystem::path& path, const MaskJob& job, bool overwrite)
       : LayerFolderSink(path, job, overwrite, ".png") {}
 
-  void encodeLayer(uint32_t index, double /*z*/, const MaskImage& mask, EncodedMaskLayer& out,
-                   MaskEncodeScratch& scratch) const override {
+ protected:
+  void encodeLayerBytes(uint32_t index, double /*z*/, const MaskImage& mask, std::vector<uint8_t>& out,
+                        MaskEncodeScratch& scratch) const override {
     checkMaskLayerSize(mask, job().grid, finalPath(), index);
-    encodeMaskPng(mask, out.bytes, scratch.deflate);
+    encodeMaskPng(mask, out, scratch.deflate);
   }
 
- protected:
   std::string layerFileName(uint32_t index) const override {
     return maskLayerFileName(job().name, index, job().layerCount, "png");
   }
