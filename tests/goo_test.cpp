@@ -456,5 +456,23 @@ TEST_F(GooCli, LayersEqualThePngLayersOfTheSameJob) {
   expectNoTemporaries();
 }
 
+// The header carries the printer and material settings the job was given (exposure, fade, lift).
+TEST_F(GooCli, HeaderCarriesTheProfileSettings) {
+  const tool_test::RunResult r =
+      run({"slice", tool_test::examplePart().string(), "-H", "0.1", "--printer", "sl1", "-q", "--masks",
+           "s.goo", "--exposure-time", "3.5", "--initial-exposure-time", "20", "--set", "lift_distance=7",
+           "--set", "lift_speed=80"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  GooHeader h;
+  std::vector<GooLayer> layers;
+  ASSERT_EQ(decodeGoo(readFile(path("s.goo")), h, layers), "");
+  EXPECT_EQ(h.exposure, 3.5f);
+  ASSERT_FALSE(layers.empty());
+  EXPECT_EQ(layers.front().exposure, 20.0f);
+  EXPECT_EQ(layers.back().exposure, 3.5f);
+  EXPECT_EQ(layers.back().liftDistance, 7.0f);
+  EXPECT_EQ(layers.back().liftSpeed, 80.0f);
+}
+
 }  // namespace
 }  // namespace toposlice

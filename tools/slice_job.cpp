@@ -145,6 +145,14 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   job.exposureTime = print.exposureTime;
   job.initialExposureTime = print.initialExposureTime;
   job.fadeLayers = print.fadedLayers;
+  job.liftDistance = print.liftDistance;
+  job.liftSpeed = print.liftSpeed;
+  job.bottomLiftDistance = print.bottomLiftDistance;
+  job.bottomLiftSpeed = print.bottomLiftSpeed;
+  job.retractSpeed = print.retractSpeed;
+  job.waitBeforeExposure = print.waitBeforeExposure;
+  job.lightPwm = static_cast<uint8_t>(print.lightPwm);
+  job.resinDensity = print.materialDensity;
   if (o.resolution) std::tie(width, height) = *o.resolution;
   if (o.pixel) pixel = *o.pixel;
   if (width == 0 || height == 0)

@@ -86,6 +86,13 @@ const SettingKey kKeys[] = {
     {"gamma_correction", P, "anti-aliasing gamma; 0: binary masks (pixel-centre rule); 1: linear coverage",
      false},
     {"light_map", P, "grayscale PNG of the display's relative intensity, multiplied into every layer", true},
+    {"lift_distance", P, "mm; platform lift after each layer (GOO, NanoDLP)", true},
+    {"lift_speed", P, "mm/min; platform lift speed", true},
+    {"bottom_lift_distance", P, "mm; platform lift after the bottom layers", true},
+    {"bottom_lift_speed", P, "mm/min; platform lift speed after the bottom layers", true},
+    {"retract_speed", P, "mm/min; platform speed back down to the next layer", true},
+    {"wait_before_exposure", P, "s; resin settling time before each exposure", true},
+    {"light_pwm", P, "UV light power 0..255", true},
     {"exposure_time", M, "s; exposure of every layer after the fade", false},
     {"initial_exposure_time", M, "s; exposure of the first layer", false},
     {"faded_layers", M, "layers of the fade from initial_exposure_time to exposure_time (3..20)", false},
@@ -121,6 +128,13 @@ KeyRule ruleOf(std::string_view key) {
   if (key == "light_map")
     return path([](PrintSettings& s) -> std::filesystem::path& { return s.lightMap; },
                 [](const PrintSettings& s) { return s.lightMap.string(); });
+  if (key == "lift_distance") return number(0, false, 1000, TS_NUMBER(liftDistance));
+  if (key == "lift_speed") return number(0, true, 1e5, TS_NUMBER(liftSpeed));
+  if (key == "bottom_lift_distance") return number(0, false, 1000, TS_NUMBER(bottomLiftDistance));
+  if (key == "bottom_lift_speed") return number(0, true, 1e5, TS_NUMBER(bottomLiftSpeed));
+  if (key == "retract_speed") return number(0, true, 1e5, TS_NUMBER(retractSpeed));
+  if (key == "wait_before_exposure") return number(0, false, 1000, TS_NUMBER(waitBeforeExposure));
+  if (key == "light_pwm") return count(0, 255, TS_COUNT(lightPwm));
   if (key == "exposure_time") return number(0, true, 1000, TS_NUMBER(exposureTime));
   if (key == "initial_exposure_time") return number(0, true, 1000, TS_NUMBER(initialExposureTime));
   if (key == "faded_layers") return count(3, 20, TS_COUNT(fadedLayers));

@@ -42,6 +42,12 @@ struct PrintSettings {
   uint32_t elefantFootLayers = 1;                     // elefant_foot_layers (toposlice): layers of the fade
   std::optional<double> gammaCorrection;              // gamma_correction; unset: --antialias decides
   std::filesystem::path lightMap;                     // light_map (toposlice): grayscale PNG; empty: none
+  // Platform motion and light (toposlice keys; written where printer files carry them: GOO, NanoDLP).
+  double liftDistance = 5.0, liftSpeed = 65.0;              // lift_distance mm, lift_speed mm/min
+  double bottomLiftDistance = 5.0, bottomLiftSpeed = 65.0;  // bottom_lift_distance, bottom_lift_speed
+  double retractSpeed = 150.0;                              // retract_speed, mm/min
+  double waitBeforeExposure = 1.0;                          // wait_before_exposure, s (resin settling)
+  uint32_t lightPwm = 255;                                  // light_pwm, UV power 0..255
   // Material.
   std::string materialName = "default";               // the chosen material preset or profile
   double exposureTime = 8.0;                          // exposure_time, s

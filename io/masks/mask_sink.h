@@ -57,8 +57,8 @@ struct MaskJob {
   // VDB only: one grid per slab of kVdbSlabLayers layers (io/masks/vdb_writer.h) instead of one grid for
   // the whole stack; ignored by the other formats.
   bool vdbSlabs = false;
-  // Platform motion and light for the formats that carry them (GOO, NanoDLP); not modelled by the
-  // slicer yet, so these are the defaults named in docs/FORMATS.md until printer profiles set them.
+  // Platform motion and light for the formats that carry them (GOO, NanoDLP), from the printer profile
+  // (io/jobs/profile.h: lift_distance, lift_speed, ...); these defaults when a sink is used on its own.
   double liftDistance = 5.0;        // mm, every layer after the bottom ones
   double liftSpeed = 65.0;          // mm/min
   double bottomLiftDistance = 5.0;  // mm, the bottom (first) layer
@@ -66,7 +66,7 @@ struct MaskJob {
   double retractSpeed = 150.0;      // mm/min, back down to the next layer
   double waitBeforeExposure = 1.0;  // s, resin settling after the retract
   uint8_t lightPwm = 255;           // UV power 0..255
-  double resinDensity = 1.1;        // g/ml, for the weight of resin (GOO)
+  double resinDensity = 1.1;        // g/ml, for the weight of resin (GOO); the material's material_density
   // The model's facets (3 corners each) for the preview pictures (GOO, SL1 thumbnails, NanoDLP 3d.png).
   // Read only while makeMaskSink runs: sinks render what they need then and keep no reference.
   // Empty: the previews show no model.

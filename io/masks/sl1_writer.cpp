@@ -192,10 +192,11 @@ std::string sl1PrusaSlicerIni(const MaskJob& job, uint32_t layers) {
   m["supports_enable"] = "0";
   // The printer's and material's settings as chosen (exposure, corrections, density), by PrusaSlicer's
   // keys; the display keys and the print height above stay as the images were written, and toposlice's
-  // own keys (light_map, elefant_foot_layers) stay out.
+  // own keys (light_map, elefant_foot_layers, the motion and light keys) stay out.
   for (const auto& [key, value] : job.settings)
     if (!key.starts_with("display_") && key != "printer_model" && key != "max_print_height" &&
-        key != "light_map" && key != "elefant_foot_layers" && !value.empty())
+        key != "light_map" && key != "elefant_foot_layers" && key.find("lift") == std::string::npos &&
+        key != "retract_speed" && key != "wait_before_exposure" && key != "light_pwm" && !value.empty())
       m[key] = value;
   if (!job.printerProfile.empty()) m["printer_settings_id"] = job.printerProfile;
   if (!job.materialName.empty()) m["sla_material_settings_id"] = job.materialName;
