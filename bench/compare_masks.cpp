@@ -32,7 +32,7 @@
 #include <thread>
 #include <vector>
 
-#include "core/mask_image.h"
+#include "core/raster/mask_image.h"
 #include "io/masks/mask_png.h"
 
 namespace toposlice {

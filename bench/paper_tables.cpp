@@ -11,11 +11,11 @@
 #include <string>
 #include <vector>
 
-#include "core/adjacency.h"
-#include "core/mesh_info.h"
-#include "core/planes.h"
-#include "core/variant_check.h"
-#include "core/weld.h"
+#include "core/mesh/adjacency.h"
+#include "core/mesh/mesh_info.h"
+#include "core/mesh/variant_check.h"
+#include "core/mesh/weld.h"
+#include "core/slicing/planes.h"
 #include "io/jobs/template_file.h"
 #include "io/readers/stl_reader.h"
 #include "parallel/band_slicer.h"

@@ -6,7 +6,7 @@
 #include <exception>
 #include <filesystem>
 
-#include "core/weld.h"
+#include "core/mesh/weld.h"
 #include "io/jobs/template_file.h"
 #include "io/readers/stl_writer.h"
 #include "tests/fixtures/shapes.h"

@@ -1,4 +1,4 @@
-// Preview pictures (core/preview.h) as PNG files: 8-bit RGB, encoded by libspng with its default zlib
+// Preview pictures (core/raster/preview.h) as PNG files: 8-bit RGB, encoded by libspng with its default zlib
 // settings, no time or text chunks, so the same picture gives the same bytes.
 #pragma once
 
@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <vector>
 
-#include "core/preview.h"
+#include "core/raster/preview.h"
 
 namespace toposlice {
 

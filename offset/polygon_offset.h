@@ -3,7 +3,8 @@
 // PrusaSlicer uses for the same corrections).
 //
 // Contract, settled once:
-// - The input region is the one the rasterizer lights (core/rasterize.h): every closed loop of every set
+// - The input region is the one the rasterizer lights (core/raster/rasterize.h): every closed loop of every
+// set
 //   adds its winding number times the set's sign; solid where the count is > 0 (the paper's positive
 //   rule). Open polylines and loops with a non-finite coordinate take no part. Loops that touch, overlap
 //   or self-intersect are therefore fine: the region is first rebuilt as clean polygons (a union under
@@ -23,8 +24,8 @@
 #include <cstdint>
 #include <span>
 
-#include "core/contours.h"
-#include "core/rasterize.h"
+#include "core/raster/rasterize.h"
+#include "core/slicing/contours.h"
 
 namespace toposlice {
 

@@ -5,11 +5,11 @@
 #include <memory>
 #include <vector>
 
-#include "core/layer_ranges.h"
-#include "core/march_mesh.h"
-#include "core/slice_closest.h"
-#include "core/slice_follow.h"
-#include "core/slice_march.h"
+#include "core/slicing/layer_ranges.h"
+#include "core/slicing/march_mesh.h"
+#include "core/slicing/slice_closest.h"
+#include "core/slicing/slice_follow.h"
+#include "core/slicing/slice_march.h"
 #include "parallel/embree_queries.h"
 #include "parallel/parallel.h"
 

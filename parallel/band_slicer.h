@@ -9,11 +9,11 @@
 #include <span>
 #include <string>
 
-#include "core/close_gaps.h"
-#include "core/contours.h"
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 #include "core/progress.h"
-#include "core/slice_lazy.h"
+#include "core/slicing/close_gaps.h"
+#include "core/slicing/contours.h"
+#include "core/slicing/slice_lazy.h"
 
 namespace toposlice {
 

@@ -35,8 +35,8 @@
 #include <span>
 #include <vector>
 
-#include "core/march_mesh.h"
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
+#include "core/slicing/march_mesh.h"
 
 namespace toposlice {
 

@@ -1,12 +1,12 @@
-// checkVariantConnectivity (core/variant_check.h) with its screening pass split over the cores; the
+// checkVariantConnectivity (core/mesh/variant_check.h) with its screening pass split over the cores; the
 // exact, serial pass runs only when some range may fail, so the result is the same.
 #pragma once
 
 #include <optional>
 #include <span>
 
-#include "core/mesh.h"
-#include "core/variant_check.h"
+#include "core/mesh/mesh.h"
+#include "core/mesh/variant_check.h"
 
 namespace toposlice {
 

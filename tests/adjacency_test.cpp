@@ -1,11 +1,11 @@
-#include "core/adjacency.h"
+#include "core/mesh/adjacency.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 
-#include "core/mesh_info.h"
-#include "core/weld.h"
+#include "core/mesh/mesh_info.h"
+#include "core/mesh/weld.h"
 #include "tests/fixtures/shapes.h"
 
 namespace toposlice {

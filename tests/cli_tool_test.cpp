@@ -31,7 +31,7 @@
 #include <thread>
 #include <vector>
 
-#include "core/contours.h"
+#include "core/slicing/contours.h"
 #include "io/masks/exr_writer.h"
 #include "io/masks/mask_png.h"
 #include "io/readers/stl_writer.h"

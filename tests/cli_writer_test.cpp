@@ -16,7 +16,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "core/contours.h"
+#include "core/slicing/contours.h"
 #include "io/contours/cli_writer.h"
 #include "io/errors.h"
 #include "io/output_file.h"

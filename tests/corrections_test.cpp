@@ -1,4 +1,4 @@
-// Corrections (offset/polygon_offset.h, core/corrections.h) against analytic areas, and through the
+// Corrections (offset/polygon_offset.h, core/print/corrections.h) against analytic areas, and through the
 // program: every correction alone and combined on a box with thin pins and on a cylinder.
 #include <gtest/gtest.h>
 
@@ -7,9 +7,9 @@
 #include <numbers>
 #include <sstream>
 
-#include "core/corrections.h"
-#include "core/mesh_info.h"
-#include "core/rasterize.h"
+#include "core/mesh/mesh_info.h"
+#include "core/print/corrections.h"
+#include "core/raster/rasterize.h"
 #include "io/readers/stl_writer.h"
 #include "offset/polygon_offset.h"
 #include "tests/fixtures/shapes.h"

@@ -5,11 +5,11 @@
 
 #include <algorithm>
 
-#include "core/adjacency.h"
-#include "core/mesh_info.h"
-#include "core/planes.h"
-#include "core/rasterize.h"
-#include "core/weld.h"
+#include "core/mesh/adjacency.h"
+#include "core/mesh/mesh_info.h"
+#include "core/mesh/weld.h"
+#include "core/raster/rasterize.h"
+#include "core/slicing/planes.h"
 #include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
 

@@ -12,9 +12,9 @@
 #include <set>
 #include <vector>
 
-#include "core/crossing.h"
-#include "core/layer_ranges.h"
-#include "core/march_mesh.h"
+#include "core/slicing/crossing.h"
+#include "core/slicing/layer_ranges.h"
+#include "core/slicing/march_mesh.h"
 #include "io/readers/stl_reader.h"
 #include "parallel/parallel.h"
 #include "tests/fixtures/models.h"

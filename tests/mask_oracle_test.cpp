@@ -20,11 +20,11 @@
 #include <string>
 #include <vector>
 
-#include "core/contours.h"
-#include "core/mask_image.h"
-#include "core/mesh.h"
-#include "core/mesh_info.h"
-#include "core/rasterize.h"
+#include "core/mesh/mesh.h"
+#include "core/mesh/mesh_info.h"
+#include "core/raster/mask_image.h"
+#include "core/raster/rasterize.h"
+#include "core/slicing/contours.h"
 #include "io/readers/stl_reader.h"
 #include "parallel/embree_queries.h"
 #include "tests/fixtures/exact_coverage.h"

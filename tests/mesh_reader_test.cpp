@@ -16,7 +16,7 @@
 #include <string>
 #include <vector>
 
-#include "core/mesh_info.h"
+#include "core/mesh/mesh_info.h"
 #include "io/errors.h"
 #include "io/readers/lib3mf_handle.h"
 #include "io/readers/stl_reader.h"

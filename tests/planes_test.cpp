@@ -1,10 +1,10 @@
-#include "core/planes.h"
+#include "core/slicing/planes.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
 
-#include "core/layer_ranges.h"
+#include "core/slicing/layer_ranges.h"
 #include "tests/fixtures/shapes.h"
 
 namespace toposlice {

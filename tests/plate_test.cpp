@@ -1,13 +1,13 @@
-// Plate jobs (tools/plate_job.h, core/arrange.h): parts sliced together equal the parts sliced alone,
+// Plate jobs (tools/plate_job.h, core/print/arrange.h): parts sliced together equal the parts sliced alone,
 // arrangement invariants and its baseline, errors before slicing, template reuse, and the program.
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <cmath>
 
-#include "core/arrange.h"
-#include "core/mesh_info.h"
-#include "core/weld.h"
+#include "core/mesh/mesh_info.h"
+#include "core/mesh/weld.h"
+#include "core/print/arrange.h"
 #include "io/errors.h"
 #include "io/jobs/plate_job_file.h"
 #include "io/jobs/template_file.h"

@@ -1,5 +1,5 @@
-// The preview renderer (core/preview.h) on analytic models: a cube's silhouette, its three visible faces
-// in the expected shading order and places; a sphere's round silhouette and the side its light comes
+// The preview renderer (core/raster/preview.h) on analytic models: a cube's silhouette, its three visible
+// faces in the expected shading order and places; a sphere's round silhouette and the side its light comes
 // from; the PNG encoding and the `toposlice preview` command.
 #include <gtest/gtest.h>
 #include <spng.h>
@@ -11,7 +11,7 @@
 #include <string>
 #include <vector>
 
-#include "core/preview.h"
+#include "core/raster/preview.h"
 #include "io/preview_png.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/tool_runner.h"

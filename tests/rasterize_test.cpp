@@ -1,4 +1,4 @@
-#include "core/rasterize.h"
+#include "core/raster/rasterize.h"
 #include "io/masks/mask_png.h"
 #include "tests/fixtures/exact_coverage.h"
 

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "core/planes.h"
+#include "core/slicing/planes.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"
 

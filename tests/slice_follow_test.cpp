@@ -1,4 +1,4 @@
-// The loop follower (core/slice_follow.h) against the marching kernel, layer after layer: thin layers
+// The loop follower (core/slicing/slice_follow.h) against the marching kernel, layer after layer: thin layers
 // (long runs carried over, a few changed facets each layer), planes through vertices (the on-plane rule at
 // every event), coarse layers (nearly every facet changes) and loops that split and merge (torus,
 // real scans). Every layer must be identical bit for bit.
@@ -6,12 +6,12 @@
 
 #include <algorithm>
 
-#include "core/adjacency.h"
-#include "core/layer_ranges.h"
-#include "core/march_mesh.h"
-#include "core/slice_follow.h"
-#include "core/slice_march.h"
-#include "core/weld.h"
+#include "core/mesh/adjacency.h"
+#include "core/mesh/weld.h"
+#include "core/slicing/layer_ranges.h"
+#include "core/slicing/march_mesh.h"
+#include "core/slicing/slice_follow.h"
+#include "core/slicing/slice_march.h"
 #include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"

@@ -5,8 +5,8 @@
 
 #include <cmath>
 
-#include "core/mesh_info.h"
-#include "core/planes.h"
+#include "core/mesh/mesh_info.h"
+#include "core/slicing/planes.h"
 #include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
 

@@ -10,7 +10,7 @@
 
 #include <unistd.h>
 
-#include "core/contours.h"
+#include "core/slicing/contours.h"
 #include "io/contours/svg_writer.h"
 #include "io/errors.h"
 #include "tests/fixtures/scratch_dir.h"

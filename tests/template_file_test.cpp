@@ -15,7 +15,7 @@
 #include <string>
 #include <vector>
 
-#include "core/weld.h"
+#include "core/mesh/weld.h"
 #include "io/errors.h"
 #include "io/readers/stl_reader.h"
 

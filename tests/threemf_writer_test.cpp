@@ -20,7 +20,7 @@
 #include <unistd.h>
 
 #include "Model/COM/NMR_DLLInterfaces.h"
-#include "core/contours.h"
+#include "core/slicing/contours.h"
 #include "io/contours/threemf_writer.h"
 #include "io/errors.h"
 #include "io/readers/lib3mf_handle.h"

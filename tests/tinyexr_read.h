@@ -6,7 +6,7 @@
 #include <filesystem>
 #include <string>
 
-#include "core/mask_image.h"
+#include "core/raster/mask_image.h"
 
 namespace toposlice {
 

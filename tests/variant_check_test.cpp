@@ -1,6 +1,6 @@
 // Variant check: instances of one shape model pass against each other's tables; other models, reordered
 // facets and moved corners fail with a report naming the facet and edge.
-#include "core/variant_check.h"
+#include "core/mesh/variant_check.h"
 
 #include <gtest/gtest.h>
 
@@ -13,8 +13,8 @@
 #include <utility>
 #include <vector>
 
-#include "core/adjacency.h"
-#include "core/weld.h"
+#include "core/mesh/adjacency.h"
+#include "core/mesh/weld.h"
 #include "io/jobs/template_file.h"
 #include "io/readers/stl_reader.h"
 #include "parallel/variant_screen.h"

@@ -1,4 +1,4 @@
-#include "core/weld.h"
+#include "core/mesh/weld.h"
 
 #include <gtest/gtest.h>
 

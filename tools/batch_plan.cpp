@@ -4,7 +4,7 @@
 #include <chrono>
 #include <system_error>
 
-#include "core/weld.h"
+#include "core/mesh/weld.h"
 #include "io/errors.h"
 #include "io/readers/mesh_reader.h"
 

@@ -10,11 +10,11 @@
 #include <thread>
 #include <vector>
 
-#include "core/mesh_info.h"
+#include "core/mesh/mesh_info.h"
+#include "core/mesh/weld.h"
 #include "core/number_text.h"
-#include "core/planes.h"
-#include "core/printer.h"
-#include "core/weld.h"
+#include "core/print/printer.h"
+#include "core/slicing/planes.h"
 #include "io/errors.h"
 #include "io/jobs/profile.h"
 #include "io/jobs/template_file.h"

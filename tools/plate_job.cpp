@@ -11,11 +11,11 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/arrange.h"
-#include "core/contours.h"
-#include "core/mesh_info.h"
+#include "core/mesh/mesh_info.h"
 #include "core/number_text.h"
-#include "core/printer.h"
+#include "core/print/arrange.h"
+#include "core/print/printer.h"
+#include "core/slicing/contours.h"
 #include "io/errors.h"
 #include "io/masks/mask_png.h"
 #include "io/output_file.h"

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 #include "core/progress.h"
 #include "io/jobs/plate_job_file.h"
 

@@ -14,14 +14,14 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/corrections.h"
-#include "core/crossing.h"
-#include "core/mesh_info.h"
+#include "core/mesh/mesh_info.h"
+#include "core/mesh/variant_check.h"
+#include "core/mesh/weld.h"
 #include "core/number_text.h"
-#include "core/printer.h"
-#include "core/rasterize.h"
-#include "core/variant_check.h"
-#include "core/weld.h"
+#include "core/print/corrections.h"
+#include "core/print/printer.h"
+#include "core/raster/rasterize.h"
+#include "core/slicing/crossing.h"
 #include "io/contours/cli_writer.h"
 #include "io/contours/svg_writer.h"
 #include "io/contours/threemf_writer.h"
@@ -89,7 +89,7 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
   bool build = method == SliceMethod::SelfReuse;
   if (templateTable != nullptr && method != SliceMethod::ClosestPoint) {
     const TemplateTable& table = *templateTable;
-    // Linear check (core/variant_check.h): facet count, then every adjacent pair shares its edge.
+    // Linear check (core/mesh/variant_check.h): facet count, then every adjacent pair shares its edge.
     const std::optional<VariantMismatch> mismatch =
         checkVariantConnectivityParallel(soup.corners, table.adjacency);
     if (!mismatch) {

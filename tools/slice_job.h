@@ -11,10 +11,10 @@
 #include <utility>
 #include <vector>
 
-#include "core/adjacency.h"
-#include "core/mesh.h"
-#include "core/planes.h"
+#include "core/mesh/adjacency.h"
+#include "core/mesh/mesh.h"
 #include "core/progress.h"
+#include "core/slicing/planes.h"
 #include "io/jobs/profile.h"
 #include "io/jobs/template_file.h"
 #include "io/readers/mesh_reader.h"
@@ -25,7 +25,7 @@ namespace toposlice {
 // Mask output settings (issue "Mask stacks for the projector").
 struct MaskOptions {
   std::filesystem::path output;  // .sl1, .exr, .vdb, or a directory of PNGs; empty: no masks
-  std::string printer;           // preset name (core/printer.h); empty: none
+  std::string printer;           // preset name (core/print/printer.h); empty: none
   std::optional<double> pixel;   // mm
   std::optional<std::pair<uint32_t, uint32_t>> resolution;  // width, height
   std::optional<std::pair<double, double>> origin;          // lower-left corner of pixel (0, 0), mm

@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "core/rasterize.h"
+#include "core/raster/rasterize.h"
 #include "io/contours/contour_sink.h"
 #include "io/jobs/profile.h"
 #include "io/masks/mask_sink.h"

@@ -17,8 +17,8 @@
 #include <string>
 #include <vector>
 
-#include "core/contours.h"
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
+#include "core/slicing/contours.h"
 
 namespace toposlice {
 

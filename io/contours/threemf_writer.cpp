@@ -29,8 +29,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "core/mesh_info.h"
-#include "core/weld.h"
+#include "core/mesh/mesh_info.h"
+#include "core/mesh/weld.h"
 #include "io/contours/xml_text.h"
 #include "io/errors.h"
 #include "io/output_file.h"

@@ -42,7 +42,7 @@
 #include <memory>
 #include <span>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 #include "io/contours/contour_sink.h"
 
 namespace toposlice {

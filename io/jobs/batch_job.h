@@ -35,14 +35,14 @@ struct BatchJob {
   std::string description;              // free text, not interpreted
   std::filesystem::path templateModel;  // the template mesh; empty when only the table is given
   std::filesystem::path templateFile;   // its .topo table: loaded if present, else built and saved there
-  // Planes (core/planes.h): layerHeight and/or layers with z0, or an explicit list of z.
+  // Planes (core/slicing/planes.h): layerHeight and/or layers with z0, or an explicit list of z.
   std::optional<double> layerHeight;  // mm
   std::optional<uint32_t> layers;
   std::optional<double> z0;             // mm; default: each model's lowest z
   std::vector<double> explicitZ;        // mm, strictly ascending; excludes the three above
   std::string method;                   // "sr", "sr-lazy" or "cp" (parallel/band_slicer.h); empty: default
   std::optional<double> joinTolerance;  // mm, for "sr-lazy" and "cp"
-  // Masks (core/mask_image.h PixelGrid): a printer preset and/or explicit image geometry.
+  // Masks (core/raster/mask_image.h PixelGrid): a printer preset and/or explicit image geometry.
   std::string printer;                                // preset name; empty: none
   std::optional<double> pixel;                        // pixel edge, mm
   std::optional<std::array<double, 2>> origin;        // lower-left corner of pixel (0, 0), mm

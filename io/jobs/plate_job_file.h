@@ -30,9 +30,9 @@ struct PlatePart {
 
 struct PlateJob {
   std::string description;
-  std::string printer;          // preset (core/printer.h); required unless pixel and resolution are given
-  std::string material;         // material preset: exposure settings of the printer files, and the report
-  std::optional<double> pixel;  // mm, overrides the printer's
+  std::string printer;   // preset (core/print/printer.h); required unless pixel and resolution are given
+  std::string material;  // material preset: exposure settings of the printer files, and the report
+  std::optional<double> pixel;                        // mm, overrides the printer's
   std::optional<std::array<uint32_t, 2>> resolution;  // pixels, overrides the printer's
   std::optional<double> buildHeight;                  // mm, overrides the printer's; 0: unchecked
   double layerHeight = 0.05;                          // mm
@@ -43,7 +43,7 @@ struct PlateJob {
   uint32_t threads = 0;
   std::optional<double> unitMm;
   double scale = 1.0;
-  // Arrangement (core/arrange.h).
+  // Arrangement (core/print/arrange.h).
   double spacing = 2.0, margin = 5.0;  // mm
   double rotationStep = 90;            // degrees; 0: parts keep their orientation
   double cell = 0.5;                   // mm, footprint grid

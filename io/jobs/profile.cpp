@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/number_text.h"
-#include "core/printer.h"
+#include "core/print/printer.h"
 #include "io/errors.h"
 
 namespace toposlice {
@@ -189,7 +189,7 @@ bool parseDouble(std::string_view text, double& value) {
   return ec == std::errc{} && ptr == end && !text.empty();
 }
 
-// Built-in printer presets as assignments (core/printer.h keeps the grid figures of the old --printer).
+// Built-in printer presets as assignments (core/print/printer.h keeps the grid figures of the old --printer).
 std::vector<std::pair<std::string, std::string>> printerPreset(const PrinterPreset& p) {
   std::vector<std::pair<std::string, std::string>> a = {
       {"printer_model", p.model},

@@ -10,7 +10,7 @@
 #include <memory>
 #include <system_error>
 
-#include "core/adjacency.h"
+#include "core/mesh/adjacency.h"
 #include "core/prefetch.h"
 #include "io/errors.h"
 #include "io/output_file.h"

@@ -4,7 +4,7 @@
 //
 // Layout (little-endian): 32-byte header {magic "TOPOSLC\0", uint32 version = 1, uint32 facet count t,
 // uint32 vertex count, uint32 flags = 0, uint64 connectivity fingerprint}, then t*3 int32 adjacency
-// entries (core/adjacency.h order), then a uint64 checksum (templateChecksum) of header + entries.
+// entries (core/mesh/adjacency.h order), then a uint64 checksum (templateChecksum) of header + entries.
 // File size is exactly 40 + 12 t bytes.
 //
 // Loading never yields a wrong table: every malformed file is an InputError("<name>: <what>") — not a
@@ -20,7 +20,7 @@
 #include <string>
 #include <vector>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 
 namespace toposlice {
 
@@ -46,7 +46,7 @@ uint64_t connectivityFingerprint(std::span<const uint32_t> facetVertices);
 uint64_t templateChecksum(std::span<const std::byte> headerAndEntries);
 
 // Builds the table of a welded template: buildAdjacency plus the fingerprint and counts. Entries are -1
-// at boundary, non-manifold, inconsistently oriented and degenerate edges (core/adjacency.h).
+// at boundary, non-manifold, inconsistently oriented and degenerate edges (core/mesh/adjacency.h).
 // Precondition: mesh.facetCount() < 2^31 (entries are int32).
 TemplateTable buildTemplateTable(const IndexedMesh& mesh);
 

@@ -8,7 +8,7 @@
 #include <string>
 #include <string_view>
 
-#include "core/preview.h"
+#include "core/raster/preview.h"
 #include "io/errors.h"
 #include "io/output_file.h"
 

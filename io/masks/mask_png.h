@@ -17,7 +17,7 @@
 #include <span>
 #include <vector>
 
-#include "core/mask_image.h"
+#include "core/raster/mask_image.h"
 #include "io/masks/deflate_runs.h"
 
 namespace toposlice {

@@ -6,7 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 
-#include "core/mask_runs.h"
+#include "core/raster/mask_runs.h"
 #include "io/errors.h"
 #include "io/masks/exr_writer.h"
 #include "io/masks/goo_writer.h"

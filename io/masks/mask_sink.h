@@ -9,7 +9,7 @@
 //   that the caller can encode layers in parallel and only write them in order: encodeLayer is
 //   thread-safe and may run for many layers at once; writeEncodedLayer takes its results in layer order.
 //   Both ways give the same bytes. Sinks that store each layer as bytes of its own (PNG directory, SL1,
-//   EXR) encode those bytes there; the default hands the layer over as mask runs (core/mask_runs.h).
+//   EXR) encode those bytes there; the default hands the layer over as mask runs (core/raster/mask_runs.h).
 // - Nothing appears under the final path until finish() returns: output goes to a temporary beside it
 //   ("<final>.tmp-<pid>-<n>") and is renamed into place at the end. A sink destroyed without finish()
 //   (an exception, a cancelled run) removes its temporary. Without `overwrite`, an existing final path
@@ -26,8 +26,8 @@
 #include <utility>
 #include <vector>
 
-#include "core/mask_image.h"
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
+#include "core/raster/mask_image.h"
 #include "io/masks/deflate_runs.h"
 #include "io/staged_directory.h"
 

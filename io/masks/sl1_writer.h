@@ -2,7 +2,7 @@
 // printers' firmware (docs/FORMATS.md, "SL1").
 //
 // Layout: a zip holding, when the job has a preview model, PrusaSlicer's thumbnails
-// "thumbnail/thumbnail400x400.png" and "thumbnail/thumbnail800x480.png" (core/preview.h), then
+// "thumbnail/thumbnail400x400.png" and "thumbnail/thumbnail800x480.png" (core/raster/preview.h), then
 // "<name>00000.png", "<name>00001.png", ... (8-bit grayscale, stored without recompression, exactly the
 // encodeMaskPng bytes), then config.ini and prusaslicer.ini, written at finish() when the layer count
 // and volume are final. Entries are streamed one by one with minizip

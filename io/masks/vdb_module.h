@@ -10,7 +10,7 @@
 #include <memory>
 #include <vector>
 
-#include "core/mask_image.h"
+#include "core/raster/mask_image.h"
 #include "io/masks/mask_sink.h"
 #include "io/masks/vdb_writer.h"
 

@@ -38,7 +38,7 @@
 #include <string>
 #include <vector>
 
-#include "core/mask_image.h"
+#include "core/raster/mask_image.h"
 #include "io/masks/mask_sink.h"
 
 namespace toposlice {

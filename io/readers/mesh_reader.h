@@ -1,5 +1,5 @@
 // Mesh input: the one entry point for meshes, whatever their format (STL, PLY, OBJ, 3MF), into a facet
-// soup (core/mesh.h) in mm.
+// soup (core/mesh/mesh.h) in mm.
 //
 // Contract (every bad input throws InputError("<name>: <what is wrong>"), one line; nothing is repaired):
 // - Container: bytes starting with 1f 8b are gzip, inflated first (io/readers/byte_input.h), whatever
@@ -35,7 +35,7 @@
 #include <span>
 #include <string>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 
 namespace toposlice {
 

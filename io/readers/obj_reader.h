@@ -1,4 +1,4 @@
-// Wavefront OBJ reader into a facet soup (core/mesh.h), through tinyobjloader (Debian
+// Wavefront OBJ reader into a facet soup (core/mesh/mesh.h), through tinyobjloader (Debian
 // libtinyobjloader-dev, its streaming callback interface: tinyobjloader lexes the lines, this reader
 // resolves indices and triangulates, so the face order and numbering are the file's).
 //
@@ -24,7 +24,7 @@
 #include <span>
 #include <string>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 
 namespace toposlice {
 

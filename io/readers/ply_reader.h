@@ -1,4 +1,4 @@
-// PLY reader (Stanford polygon format 1.0) into a facet soup (core/mesh.h). Debian has no maintained PLY
+// PLY reader (Stanford polygon format 1.0) into a facet soup (core/mesh/mesh.h). Debian has no maintained PLY
 // library, so this is a small one of toposlice's own, written from the format description (Greg Turk,
 // "The PLY Polygon File Format", 1994; the same grammar as RPly and the Stanford tools).
 //
@@ -31,7 +31,7 @@
 #include <span>
 #include <string>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 
 namespace toposlice {
 

@@ -1,4 +1,4 @@
-// STL reader: binary or ASCII STL, optionally gzip-compressed, into a facet soup (core/mesh.h).
+// STL reader: binary or ASCII STL, optionally gzip-compressed, into a facet soup (core/mesh/mesh.h).
 //
 // Contract (every bad input throws InputError("<name>: <what is wrong>"); nothing is repaired):
 // - Container: bytes starting with 1f 8b are a gzip stream (detected by content, never by the file name),
@@ -58,7 +58,7 @@
 #include <span>
 #include <string>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 
 namespace toposlice {
 

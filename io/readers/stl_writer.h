@@ -5,7 +5,7 @@
 #include <filesystem>
 #include <string>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 
 namespace toposlice {
 

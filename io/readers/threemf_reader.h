@@ -1,4 +1,4 @@
-// 3MF reader (3MF Core Specification 1.x) into a facet soup (core/mesh.h), through lib3mf 1.8 (Debian
+// 3MF reader (3MF Core Specification 1.x) into a facet soup (core/mesh/mesh.h), through lib3mf 1.8 (Debian
 // lib3mf-dev), reading the package from memory (lib3mf_reader_readfrombuffer).
 //
 // Contract (every bad input throws InputError("<name>: <what is wrong>"); nothing is repaired):
@@ -20,7 +20,7 @@
 #include <span>
 #include <string>
 
-#include "core/mesh.h"
+#include "core/mesh/mesh.h"
 
 namespace toposlice {
 

@@ -1,0 +1,15 @@
+// Welding: facet corners with bit-identical float coordinates become one vertex (-0.0 equals +0.0).
+// No tolerance: STL writers emit shared corners with identical bits, and a tolerance would merge
+// distinct features of fine models. Vertices are numbered in order of first appearance, so the result
+// depends only on the soup. Expected linear time (open-addressing hash on the coordinate bits).
+#pragma once
+
+#include <span>
+
+#include "core/mesh/mesh.h"
+
+namespace toposlice {
+
+IndexedMesh weldCorners(std::span<const Point3f> corners);
+
+}  // namespace toposlice

@@ -1,0 +1,51 @@
+#include "core/print/corrections.h"
+
+#include <cassert>
+#include <cmath>
+
+namespace toposlice {
+
+std::array<double, 3> scaleCentre(const BoundingBox& box) {
+  return {0.5 * (double{box.min.x} + box.max.x), 0.5 * (double{box.min.y} + box.max.y), double{box.min.z}};
+}
+
+void scaleCorners(std::span<Point3f> corners, const std::array<double, 3>& factors,
+                  const std::array<double, 3>& centre) {
+  for (Point3f& p : corners) {
+    p.x = static_cast<float>(centre[0] + factors[0] * (double{p.x} - centre[0]));
+    p.y = static_cast<float>(centre[1] + factors[1] * (double{p.y} - centre[1]));
+    p.z = static_cast<float>(centre[2] + factors[2] * (double{p.z} - centre[2]));
+  }
+}
+
+double elephantFootAt(uint32_t k, double amount, uint32_t layers) {
+  assert(layers >= 1);
+  if (k >= layers || !(amount > 0)) return 0.0;
+  return amount * static_cast<double>(layers - k) / static_cast<double>(layers);
+}
+
+std::array<uint8_t, 256> gammaTable(double gamma) {
+  std::array<uint8_t, 256> table{};
+  for (int v = 0; v < 256; ++v)
+    table[static_cast<std::size_t>(v)] =
+        static_cast<uint8_t>(std::lround(255.0 * std::pow(static_cast<double>(v) / 255.0, gamma)));
+  return table;
+}
+
+void applyTable(MaskImage& mask, const std::array<uint8_t, 256>& table) {
+  for (uint8_t& v : mask.pixels) v = table[v];
+  mask.litBegin.clear();
+  mask.litEnd.clear();
+}
+
+void applyLightMap(MaskImage& mask, const MaskImage& map) {
+  assert(map.pixels.size() == mask.pixels.size());
+  for (std::size_t i = 0; i < mask.pixels.size(); ++i) {
+    const unsigned v = mask.pixels[i];
+    if (v != 0) mask.pixels[i] = static_cast<uint8_t>((v * map.pixels[i] + 127u) / 255u);
+  }
+  mask.litBegin.clear();
+  mask.litEnd.clear();
+}
+
+}  // namespace toposlice

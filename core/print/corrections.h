@@ -1,0 +1,39 @@
+// Printer and material corrections that need no polygon library (issue "Production print settings"):
+// the scaling correction of a model, the elephant-foot schedule over the bottom layers, the
+// anti-aliasing gamma and the display's light-uniformity map. Offsets live in offset/polygon_offset.h.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <span>
+
+#include "core/mesh/mesh.h"
+#include "core/raster/mask_image.h"
+
+namespace toposlice {
+
+// Centre of the scaling correction: the centre of the xy bounding box, at the lowest z (the model stays
+// on the platform and centred where the pixel grid is centred by default).
+std::array<double, 3> scaleCentre(const BoundingBox& box);
+
+// Scales every corner about `centre` by `factors` (x, y, z, each > 0): p' = c + f (p - c), computed in
+// double and rounded to float once. A pure function of the corner: the same bits for any split.
+void scaleCorners(std::span<Point3f> corners, const std::array<double, 3>& factors,
+                  const std::array<double, 3>& centre);
+
+// Elephant-foot shrink of layer `k` (0 = the bottom layer): `amount` on layer 0, fading linearly to
+// nothing over `layers` layers (amount * (layers - k) / layers for k < layers, else 0). layers >= 1.
+double elephantFootAt(uint32_t k, double amount, uint32_t layers);
+
+// Table of the anti-aliasing gamma applied to 8-bit coverage v: round(255 * (v / 255)^gamma); gamma = 1
+// is the identity. gamma > 0 (gamma = 0 means binary masks, which the rasterizer makes directly).
+std::array<uint8_t, 256> gammaTable(double gamma);
+
+// Every pixel through `table`. Clears the mask's lit-row extents (a value may become 0).
+void applyTable(MaskImage& mask, const std::array<uint8_t, 256>& table);
+
+// Light-uniformity compensation: every pixel multiplied by the map's relative intensity,
+// v' = round(v * m / 255). `map` has the mask's size (checked by the caller). Clears the extents.
+void applyLightMap(MaskImage& mask, const MaskImage& map);
+
+}  // namespace toposlice

@@ -1,0 +1,39 @@
+// A small software renderer for the preview pictures that printer files carry (GOO, SL1 thumbnails,
+// NanoDLP's 3d.png) and for `toposlice preview`.
+//
+// Orthographic camera looking down at the model from the front right (azimuth kPreviewAzimuthDeg from
+// -y towards +x, elevation kPreviewElevationDeg above the horizon), the projected bounding box of the
+// model fitted into the picture with a margin and centred. Triangles are rasterized with a depth buffer
+// at 2 x 2 samples per pixel (averaged, so edges are smooth), one flat Lambert shade per facet from a
+// light above, in front and to the left. Facets are lit on the side that faces the camera, so an
+// inside-out mesh still shows. Plain serial code: the same mesh gives the same pixels.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "core/mesh/mesh.h"
+
+namespace toposlice {
+
+// 8-bit RGB picture, rows top-down, 3 bytes per pixel.
+struct RgbImage {
+  uint32_t width = 0, height = 0;
+  std::vector<uint8_t> rgb;  // width * height * 3
+};
+
+inline constexpr double kPreviewAzimuthDeg = 30;
+inline constexpr double kPreviewElevationDeg = 40;
+inline constexpr uint8_t kPreviewBackground[3] = {36, 38, 46};  // dark slate
+inline constexpr uint8_t kPreviewModel[3] = {110, 180, 235};    // fully lit model colour (light blue)
+
+// World direction towards the light (unit length): above, in front (-y) and to the left (-x).
+Point3f previewLightDirection();
+
+// Renders the facet soup `corners` (3 per facet, counter-clockwise seen from outside) into `out`
+// (replaced) of width x height >= 1. Facets with a non-finite corner are skipped; an empty mesh gives
+// the background alone.
+void renderPreview(std::span<const Point3f> corners, uint32_t width, uint32_t height, RgbImage& out);
+
+}  // namespace toposlice

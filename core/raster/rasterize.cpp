@@ -1,0 +1,717 @@
+#include "core/raster/rasterize.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+// Scanline conversion with an active edge table: edges are bucketed by the first sample line they cross
+// (count, prefix sum, fill), the active list is kept sorted by x from one sample line to the next
+// (insertion sort on nearly sorted data) and swept left to right accumulating the winding count.
+
+namespace toposlice {
+namespace {
+
+// Bands where edges cross are cut at every crossing, found pairwise: exact, but O(edges^2) per band and
+// O(edges^3) per row when most pairs cross. Above this many edges such a band is sampled instead.
+constexpr std::size_t kMaxExactCrossingEdges = 64;
+constexpr double kSampleLinesPerPixel = 16.0;
+
+double samplePosition(double origin, double pitch, uint32_t k) {
+  return origin + (static_cast<double>(k) + 0.5) * pitch;
+}
+
+// Smallest k in [0, count] with samplePosition(k) >= v (count when there is none). The division only
+// guesses; the answer is settled with the same expression every caller uses for the sample position.
+uint32_t firstSampleAtOrAbove(double v, double origin, double pitch, uint32_t count) {
+  const double guess = std::ceil((v - origin) / pitch - 0.5);
+  uint32_t k = 0;
+  if (guess >= static_cast<double>(count)) {
+    k = count;
+  } else if (guess > 0.0) {
+    k = static_cast<uint32_t>(guess);
+  }
+  while (k > 0 && samplePosition(origin, pitch, k - 1) >= v) --k;
+  while (k < count && samplePosition(origin, pitch, k) < v) ++k;
+  return k;
+}
+
+bool allFinite(std::span<const Point2d> loop) {
+  for (const Point2d& p : loop) {
+    if (!std::isfinite(p.x) || !std::isfinite(p.y)) return false;
+  }
+  return true;
+}
+
+// Collects the edges of all closed, finite loops that cross at least one of `count` sample lines
+// origin + (k + 1/2) pitch, then groups them by first line into scratch.bucketed / bucketStart.
+void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitch, uint32_t count,
+                    RasterScratch& scratch) {
+  std::vector<RasterEdge>& edges = scratch.edges;
+  edges.clear();
+  for (const ContourSet& set : sets) {
+    assert(set.layer != nullptr && (set.sign == 1 || set.sign == -1));
+    const LayerContours& layer = *set.layer;
+    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+      if (layer.loopClosed[l] == 0) continue;
+      const std::span<const Point2d> loop = layer.loopPoints(l);
+      if (!allFinite(loop)) continue;
+      const std::size_t n = loop.size();
+      for (std::size_t i = 0; i < n; ++i) {
+        const Point2d a = loop[i];
+        const Point2d b = loop[i + 1 == n ? 0 : i + 1];
+        if (a.y == b.y) continue;  // horizontal: crosses no sample line under the half-open rule
+        const bool upward = a.y < b.y;
+        const Point2d lo = upward ? a : b;
+        const Point2d hi = upward ? b : a;
+        const uint32_t first = firstSampleAtOrAbove(lo.y, origin, pitch, count);
+        const uint32_t end = firstSampleAtOrAbove(hi.y, origin, pitch, count);
+        if (first >= end) continue;
+        double slope = (hi.x - lo.x) / (hi.y - lo.y);
+        if (!std::isfinite(slope)) slope = 0.0;  // dy is so small that any x of the edge is as good
+        // A CCW outer loop runs downwards on its left side: crossing it left to right enters the solid.
+        const int32_t winding = upward ? -set.sign : set.sign;
+        edges.push_back(RasterEdge{0.0, lo.x, lo.y, slope, first, end, winding});
+      }
+    }
+  }
+
+  std::vector<uint32_t>& start = scratch.bucketStart;
+  start.assign(static_cast<std::size_t>(count) + 1, 0);
+  for (const RasterEdge& e : edges) ++start[e.first + 1];
+  for (uint32_t k = 0; k < count; ++k) start[k + 1] += start[k];
+  scratch.bucketed.resize(edges.size());
+  for (const RasterEdge& e : edges) scratch.bucketed[start[e.first]++] = e;  // start[k] becomes start[k+1]
+  for (uint32_t k = count; k > 0; --k) start[k] = start[k - 1];
+  start[0] = 0;
+
+  scratch.active.clear();
+  scratch.active.reserve(edges.size());
+}
+
+// Sorts by x. Insertion sort while the data is nearly sorted (the usual case from one sample line to the
+// next); falls back to std::sort once the moves exceed a budget linear in the size.
+void sortByX(std::vector<RasterEdge>& edges) {
+  const std::size_t n = edges.size();
+  std::size_t budget = 4 * n + 64;
+  for (std::size_t i = 1; i < n; ++i) {
+    const RasterEdge e = edges[i];
+    std::size_t j = i;
+    while (j > 0 && edges[j - 1].x > e.x) {
+      edges[j] = edges[j - 1];
+      --j;
+      if (--budget == 0) {
+        edges[j] = e;
+        std::sort(edges.begin(), edges.end(),
+                  [](const RasterEdge& p, const RasterEdge& q) { return p.x < q.x; });
+        return;
+      }
+    }
+    edges[j] = e;
+  }
+}
+
+// Moves the active edge table to sample line k at height y: drops edges that ended, adds the edges whose
+// first line is k, computes every crossing and sorts by x.
+void advanceTo(uint32_t k, double y, RasterScratch& scratch) {
+  std::vector<RasterEdge>& active = scratch.active;
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < active.size(); ++i) {
+    if (active[i].end <= k) continue;
+    RasterEdge e = active[i];
+    e.x = e.xLow + (y - e.yLow) * e.slope;
+    active[kept++] = e;
+  }
+  active.resize(kept);
+  for (uint32_t b = scratch.bucketStart[k]; b < scratch.bucketStart[k + 1]; ++b) {
+    RasterEdge e = scratch.bucketed[b];
+    e.x = e.xLow + (y - e.yLow) * e.slope;
+    active.push_back(e);
+  }
+  sortByX(active);
+}
+
+bool hasWork(uint32_t k, const RasterScratch& scratch) {
+  return !scratch.active.empty() || scratch.bucketStart[k] != scratch.bucketStart[k + 1];
+}
+
+// Calls emit(xa, xb) for each maximal run [xa, xb) of positive winding along the current sample line.
+// Crossings at the same x are summed first, so their order does not matter.
+template <class Emit>
+void forEachSolidRun(std::span<const RasterEdge> active, Emit&& emit) {
+  int32_t winding = 0;
+  double runStart = 0.0;
+  std::size_t i = 0;
+  while (i < active.size()) {
+    const double x = active[i].x;
+    int32_t next = winding;
+    do {
+      next += active[i].winding;
+      ++i;
+    } while (i < active.size() && active[i].x == x);
+    if (winding <= 0 && next > 0) {
+      runStart = x;
+    } else if (winding > 0 && next <= 0) {
+      emit(runStart, x);
+    }
+    winding = next;
+  }
+}
+
+bool usableGrid(const PixelGrid& grid) {
+  return grid.pixel > 0.0 && std::isfinite(grid.pixel);
+}
+
+// ---- Exact coverage ----
+
+// u of edge e at height v, exact at its ends (so consecutive edges of a loop meet exactly) and kept
+// within its u range elsewhere.
+double edgeU(const CoverageEdge& e, double v) {
+  if (v <= e.v0) return e.u0;
+  if (v >= e.v1) return e.u1;
+  const double u = e.u0 + (v - e.v0) * e.slope;
+  return std::clamp(u, std::min(e.u0, e.u1), std::max(e.u0, e.u1));
+}
+
+// Collects the non-horizontal edges of all closed, finite loops that overlap rows [0, height) in pixel
+// units, grouped by first row into scratch.coverageBucketed / coverageRowStart.
+void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid, RasterScratch& scratch) {
+  std::vector<CoverageEdge>& edges = scratch.coverageEdges;
+  edges.clear();
+  const uint32_t height = grid.height;
+  const double inv = 1.0 / grid.pixel;
+  const double top = static_cast<double>(height);
+  for (const ContourSet& set : sets) {
+    assert(set.layer != nullptr && (set.sign == 1 || set.sign == -1));
+    const LayerContours& layer = *set.layer;
+    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+      if (layer.loopClosed[l] == 0) continue;
+      const std::span<const Point2d> loop = layer.loopPoints(l);
+      if (!allFinite(loop)) continue;
+      const std::size_t n = loop.size();
+      std::vector<int32_t>& ids = scratch.loopIds;
+      ids.assign(n, -1);
+      for (std::size_t i = 0; i < n; ++i) {
+        const Point2d a = loop[i];
+        const Point2d b = loop[i + 1 == n ? 0 : i + 1];
+        const double av = (a.y - grid.y0) * inv, bv = (b.y - grid.y0) * inv;
+        if (av == bv) continue;  // horizontal: encloses no area of its own
+        const bool upward = av < bv;
+        const double v0 = upward ? av : bv, v1 = upward ? bv : av;
+        if (v1 <= 0.0 || v0 >= top) continue;
+        const double u0 = ((upward ? a.x : b.x) - grid.x0) * inv;
+        const double u1 = ((upward ? b.x : a.x) - grid.x0) * inv;
+        double slope = (u1 - u0) / (v1 - v0);
+        if (!std::isfinite(slope)) slope = 0.0;
+        const uint32_t first = v0 <= 0.0 ? 0 : static_cast<uint32_t>(v0);
+        const uint32_t end = v1 >= top ? height : static_cast<uint32_t>(std::ceil(v1));
+        if (first >= end) continue;
+        const int32_t winding = upward ? -set.sign : set.sign;
+        ids[i] = static_cast<int32_t>(edges.size());
+        edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
+                                     static_cast<uint32_t>(edges.size()), -1});
+      }
+      // The edge continuing each one upwards: the next edge of the loop for an upward edge, the
+      // previous one for a downward edge, when it runs the same way (else the chain ends there).
+      for (std::size_t i = 0; i < n; ++i) {
+        if (ids[i] < 0) continue;
+        CoverageEdge& e = edges[static_cast<std::size_t>(ids[i])];
+        const bool upward = e.winding == -set.sign;
+        const int32_t other = ids[upward ? (i + 1 == n ? 0 : i + 1) : (i == 0 ? n - 1 : i - 1)];
+        if (other >= 0 && edges[static_cast<std::size_t>(other)].winding == e.winding) e.above = other;
+      }
+    }
+  }
+  std::vector<uint32_t>& start = scratch.coverageRowStart;
+  start.assign(static_cast<std::size_t>(height) + 1, 0);
+  for (const CoverageEdge& e : edges) ++start[e.firstRow + 1];
+  for (uint32_t k = 0; k < height; ++k) start[k + 1] += start[k];
+  scratch.coverageBucketed.resize(edges.size());
+  for (const CoverageEdge& e : edges) scratch.coverageBucketed[start[e.firstRow]++] = e;
+  for (uint32_t k = height; k > 0; --k) start[k] = start[k - 1];
+  start[0] = 0;
+  scratch.coverageActive.clear();
+  scratch.pieceOfEdge.resize(edges.size());
+}
+
+// Insertion sort while nearly sorted, std::sort once the moves exceed a linear budget.
+template <class T, class Less>
+void sortNearlySortedBy(std::vector<T>& items, Less less) {
+  const std::size_t n = items.size();
+  std::size_t budget = 4 * n + 64;
+  for (std::size_t i = 1; i < n; ++i) {
+    const T item = items[i];
+    std::size_t j = i;
+    while (j > 0 && less(item, items[j - 1])) {
+      items[j] = items[j - 1];
+      --j;
+      if (--budget == 0) {
+        items[j] = item;
+        std::sort(items.begin(), items.end(), less);
+        return;
+      }
+    }
+    items[j] = item;
+  }
+}
+
+template <class T, class Key>
+void sortNearlySorted(std::vector<T>& items, Key key) {
+  sortNearlySortedBy(items, [&](const T& p, const T& q) { return key(p) < key(q); });
+}
+
+// Adds sign * (the part of the row right of the segment from u = ua to u = ub over a height dy) to the
+// row's cells: per pixel i the segment crosses, dy_i * (1 - f) to cell i and dy_i * f to cell i + 1,
+// f the mean position of the segment inside the pixel. The prefix sum of the cells is then the covered
+// area per pixel. u is clipped to [0, width]: left of the grid the whole row is to the right (cell 0),
+// right of it nothing is.
+void addBoundarySegment(double ua, double ub, double dy, uint32_t width, double* cells) {
+  const double w = static_cast<double>(width);
+  double lo = std::min(ua, ub), hi = std::max(ua, ub);
+  const double len = hi - lo;
+  if (!(len > 0.0)) {  // vertical
+    if (lo >= w) return;
+    if (lo <= 0.0) {
+      cells[0] += dy;
+      return;
+    }
+    const auto i = static_cast<uint32_t>(lo);
+    const double f = lo - i;
+    cells[i] += dy * (1.0 - f);
+    cells[i + 1] += dy * f;
+    return;
+  }
+  const double perU = dy / len;
+  if (lo < 0.0) {
+    cells[0] += perU * (std::min(hi, 0.0) - lo);
+    if (hi <= 0.0) return;
+    lo = 0.0;
+  }
+  if (lo >= w) return;
+  hi = std::min(hi, w);
+  auto i = static_cast<uint32_t>(lo);
+  for (;;) {
+    const double cellLo = static_cast<double>(i);
+    const double a = std::max(lo, cellLo), b = std::min(hi, cellLo + 1.0);
+    const double d = perU * (b - a);
+    const double f = 0.5 * (a + b) - cellLo;
+    cells[i] += d * (1.0 - f);
+    cells[i + 1] += d * f;
+    if (cellLo + 1.0 >= hi) break;
+    ++i;
+  }
+}
+
+// Cells touched by addBoundarySegment(ua, ub, ...).
+CellSpan segmentCells(double ua, double ub, uint32_t width) {
+  const double w = static_cast<double>(width);
+  const auto cell = [w](double u) { return u <= 0.0 ? 0u : static_cast<uint32_t>(std::min(u, w)); };
+  return {cell(std::min(ua, ub)), cell(std::max(ua, ub)) + 1};
+}
+
+// Accumulates the boundary of the positive-winding region over the sub-band [ya, yb], whose pieces
+// (sorted by um) neither start, end nor cross inside it.
+void accumulateBand(std::span<const CoveragePiece> pieces, double dy, uint32_t width, double* cells,
+                    std::vector<CellSpan>& spans) {
+  int32_t winding = 0;
+  std::size_t i = 0;
+  while (i < pieces.size()) {
+    const std::size_t group = i;
+    int32_t next = winding;
+    do {
+      next += pieces[i].winding;
+      ++i;
+    } while (i < pieces.size() && pieces[i].um == pieces[group].um);
+    if ((winding <= 0) != (next <= 0)) {
+      addBoundarySegment(pieces[group].ua, pieces[group].ub, next > 0 ? dy : -dy, width, cells);
+      spans.push_back(segmentCells(pieces[group].ua, pieces[group].ub, width));
+    }
+    winding = next;
+  }
+}
+
+void fillPieces(std::span<const CoverageEdge> active, double ya, double yb,
+                std::vector<CoveragePiece>& pieces) {
+  pieces.clear();
+  const double ym = 0.5 * (ya + yb);
+  for (uint32_t k = 0; k < active.size(); ++k) {
+    const CoverageEdge& e = active[k];
+    if (e.v0 > ya || e.v1 < yb) continue;
+    pieces.push_back(CoveragePiece{edgeU(e, ya), edgeU(e, ym), edgeU(e, yb), k, e.winding});
+  }
+  sortNearlySorted(pieces, [](const CoveragePiece& p) { return p.um; });
+}
+
+// One sub-band of a row: finds crossings of its pieces (then cuts it at each crossing) and accumulates.
+void coverBand(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
+               RasterScratch& scratch) {
+  std::vector<CoveragePiece>& pieces = scratch.pieces;
+  fillPieces(active, ya, yb, pieces);
+  if (pieces.empty()) return;
+  bool ordered = true;
+  for (std::size_t k = 1; k < pieces.size() && ordered; ++k)
+    ordered = pieces[k - 1].ua <= pieces[k].ua && pieces[k - 1].ub <= pieces[k].ub;
+  double* cells = scratch.cells.data();
+  if (ordered) {
+    accumulateBand(pieces, yb - ya, width, cells, scratch.spans);
+    return;
+  }
+  // Edges cross inside the band: cut it at every crossing (pairs whose order differs at an end).
+  std::vector<double> cuts{ya, yb};
+  for (std::size_t k = 0; k < pieces.size(); ++k) {
+    for (std::size_t l = k + 1; l < pieces.size(); ++l) {
+      const double da = pieces[k].ua - pieces[l].ua, db = pieces[k].ub - pieces[l].ub;
+      if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
+        const double y = ya + (yb - ya) * (da / (da - db));
+        if (y > ya && y < yb) cuts.push_back(y);
+      }
+    }
+  }
+  std::sort(cuts.begin(), cuts.end());
+  cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
+  for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
+    fillPieces(active, cuts[c], cuts[c + 1], pieces);
+    accumulateBand(pieces, cuts[c + 1] - cuts[c], width, cells, scratch.spans);
+  }
+}
+
+// A band of a row by sub-bands cut at every vertex inside it (the general path, see rasterize.h).
+// The band [ya, yb] by sample lines (kSampleLinesPerPixel per pixel height, at least one): along each,
+// the solid runs are exact in x and weigh the band's height / lines (the midpoint rule in y). Used where
+// too many edges cross for the exact cuts (see rasterize.h).
+void coverBandBySampling(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
+                         RasterScratch& scratch) {
+  const auto lines = static_cast<uint32_t>(std::max(1.0, std::ceil(kSampleLinesPerPixel * (yb - ya))));
+  const double h = (yb - ya) / lines;
+  std::vector<CoveragePiece>& crossings = scratch.pieces;
+  double* cells = scratch.cells.data();
+  for (uint32_t l = 0; l < lines; ++l) {
+    const double y = ya + (l + 0.5) * h;
+    crossings.clear();
+    for (uint32_t k = 0; k < active.size(); ++k) {
+      const CoverageEdge& e = active[k];
+      if (e.v0 <= y && y < e.v1) {
+        const double u = edgeU(e, y);
+        crossings.push_back({u, u, u, k, e.winding});
+      }
+    }
+    sortNearlySorted(crossings, [](const CoveragePiece& p) { return p.um; });
+    // A run [ua, ub) of height h is a rising boundary at ua and a falling one at ub.
+    accumulateBand(crossings, h, width, cells, scratch.spans);
+  }
+}
+
+void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
+                         RasterScratch& scratch) {
+  std::size_t overlapping = 0;
+  for (const CoverageEdge& e : active) overlapping += e.v0 < yb && e.v1 > ya ? 1 : 0;
+  if (overlapping > kMaxExactCrossingEdges) {
+    coverBandBySampling(active, ya, yb, width, scratch);
+    return;
+  }
+  std::vector<double>& ys = scratch.bandYs;
+  ys.clear();
+  ys.push_back(ya);
+  for (const CoverageEdge& e : active) {
+    if (e.v0 > ya && e.v0 < yb) ys.push_back(e.v0);
+    if (e.v1 > ya && e.v1 < yb) ys.push_back(e.v1);
+  }
+  ys.push_back(yb);
+  if (ys.size() > 2) {
+    std::sort(ys.begin() + 1, ys.end() - 1);
+    ys.erase(std::unique(ys.begin(), ys.end()), ys.end());
+  }
+  for (std::size_t b = 0; b + 1 < ys.size(); ++b) coverBand(active, ys[b], ys[b + 1], width, scratch);
+}
+
+// One pixel row [y0, y1] (see rasterize.h): the active edges' parts in the row are linked, vertex to
+// vertex, into chains of one winding; the row is cut where a chain starts or ends inside it (local
+// extremes, horizontal edges, touching loops). In each band the chains spanning it are ordered at its
+// bottom; if no two neighbours swap sides (checked at every vertex of either) the boundary is decided
+// once per chain, else the band is cut at every vertex and crossing (coverBandByVertices).
+void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32_t width,
+              RasterScratch& scratch) {
+  std::vector<CoverageRowPiece>& pieces = scratch.rowPieces;
+  std::vector<uint32_t>& starts = scratch.chainStarts;
+  pieces.clear();
+  starts.clear();
+  for (uint32_t k = 0; k < active.size(); ++k) {
+    const CoverageEdge& e = active[k];
+    const double va = std::max(e.v0, y0), vb = std::min(e.v1, y1);
+    if (va > y0) starts.push_back(static_cast<uint32_t>(pieces.size()));
+    scratch.pieceOfEdge[e.id] = static_cast<uint32_t>(pieces.size());
+    pieces.push_back({edgeU(e, va), edgeU(e, vb), va, vb, -1, k, false});
+  }
+  // Link each piece ending inside the row to the piece of the edge continuing it (its loop neighbour).
+  std::vector<double>& cuts = scratch.rowCuts;
+  cuts.clear();
+  cuts.push_back(y0);
+  for (CoverageRowPiece& p : pieces) {
+    if (p.vb >= y1) continue;
+    const int32_t above = active[p.edge].above;
+    if (above >= 0) {
+      const uint32_t q = scratch.pieceOfEdge[static_cast<std::size_t>(above)];
+      if (q < pieces.size() && active[pieces[q].edge].id == static_cast<uint32_t>(above) &&
+          pieces[q].va == p.vb && pieces[q].ua == p.ub) {
+        p.next = static_cast<int32_t>(q);
+        pieces[q].linked = true;
+        continue;
+      }
+    }
+    cuts.push_back(p.vb);  // a chain ends inside the row
+  }
+  for (const uint32_t q : starts)
+    if (!pieces[q].linked) cuts.push_back(pieces[q].va);  // a chain starts inside the row
+  cuts.push_back(y1);
+  if (cuts.size() > 2) {
+    std::sort(cuts.begin() + 1, cuts.end() - 1);
+    cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
+  }
+
+  std::vector<ChainCursor>& live = scratch.chains;
+  double* cells = scratch.cells.data();
+  const double w = static_cast<double>(width);
+  const auto cell = [w](double u) { return u <= 0.0 ? 0u : static_cast<uint32_t>(std::min(u, w)); };
+  const auto uAt = [&](uint32_t k, double y) { return edgeU(active[pieces[k].edge], y); };
+  for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
+    const double ya = cuts[c], yb = cuts[c + 1];
+    live.clear();
+    for (uint32_t k = 0; k < pieces.size(); ++k) {
+      if (pieces[k].linked) continue;  // not a chain head
+      uint32_t first = k;
+      while (pieces[first].vb <= ya && pieces[first].next >= 0)
+        first = static_cast<uint32_t>(pieces[first].next);
+      if (pieces[first].va > ya || pieces[first].vb <= ya) continue;  // the chain does not span the band
+      uint32_t last = first;
+      double lo = std::min(pieces[first].ua, pieces[first].ub),
+             hi = std::max(pieces[first].ua, pieces[first].ub);
+      while (pieces[last].vb < yb && pieces[last].next >= 0) {
+        last = static_cast<uint32_t>(pieces[last].next);
+        lo = std::min({lo, pieces[last].ua, pieces[last].ub});
+        hi = std::max({hi, pieces[last].ua, pieces[last].ub});
+      }
+      if (pieces[last].vb < yb) continue;
+      live.push_back({uAt(first, ya), uAt(last, yb), lo, hi, first});
+    }
+    sortNearlySortedBy(live, [](const ChainCursor& p, const ChainCursor& q) {
+      return p.ua < q.ua || (p.ua == q.ua && p.ub < q.ub);
+    });
+    bool ordered = true;
+    for (std::size_t h = 1; h < live.size() && ordered; ++h) {
+      if (live[h - 1].hi < live[h].lo) continue;  // apart over the whole band
+      uint32_t a = live[h - 1].first, b = live[h].first;
+      for (;;) {
+        const double y = std::min({pieces[a].vb, pieces[b].vb, yb});
+        if (uAt(a, y) > uAt(b, y)) {
+          ordered = false;
+          break;
+        }
+        if (y >= yb) break;
+        if (pieces[a].vb == y) a = static_cast<uint32_t>(pieces[a].next);
+        if (pieces[b].vb == y) b = static_cast<uint32_t>(pieces[b].next);
+      }
+    }
+    if (!ordered) {
+      coverBandByVertices(active, ya, yb, width, scratch);
+      continue;
+    }
+    int32_t winding = 0;
+    for (const ChainCursor& chain : live) {
+      const int32_t next = winding + active[pieces[chain.first].edge].winding;
+      const bool boundary = (winding <= 0) != (next <= 0);
+      winding = next;
+      if (!boundary) continue;
+      const double sign = next > 0 ? 1.0 : -1.0;
+      double lo = chain.ua, hi = lo;
+      for (uint32_t k = chain.first;; k = static_cast<uint32_t>(pieces[k].next)) {
+        const double va = std::max(pieces[k].va, ya), vb = std::min(pieces[k].vb, yb);
+        const double ua = va == pieces[k].va ? pieces[k].ua : uAt(k, va);
+        const double ub = vb == pieces[k].vb ? pieces[k].ub : uAt(k, vb);
+        addBoundarySegment(ua, ub, sign * (vb - va), width, cells);
+        lo = std::min({lo, ua, ub});
+        hi = std::max({hi, ua, ub});
+        if (pieces[k].vb >= yb) break;
+      }
+      scratch.spans.push_back({cell(lo), cell(hi) + 1});
+    }
+  }
+  sortNearlySorted(scratch.spans, [](const CellSpan& s) { return s.begin; });
+}
+
+// Clears `out` for a new layer of `grid`: only the previous image's lit spans when it has extents.
+// Leaves every row dark with empty extents.
+void prepareImage(const PixelGrid& grid, MaskImage& out) {
+  const uint32_t width = grid.width, height = grid.height;
+  const bool reuse = out.width == width && out.height == height && out.hasExtents() &&
+                     out.pixels.size() == static_cast<std::size_t>(width) * height;
+  out.width = width;
+  out.height = height;
+  out.pixels.resize(static_cast<std::size_t>(width) * height);
+  if (!reuse) std::fill(out.pixels.begin(), out.pixels.end(), uint8_t{0});
+  out.litBegin.resize(height);
+  out.litEnd.resize(height);
+  for (uint32_t r = 0; r < height; ++r) {
+    if (reuse && out.litBegin[r] < out.litEnd[r])
+      std::memset(out.pixels.data() + static_cast<std::size_t>(r) * width + out.litBegin[r], 0,
+                  out.litEnd[r] - out.litBegin[r]);
+    out.litBegin[r] = width;
+    out.litEnd[r] = 0;
+  }
+}
+
+}  // namespace
+
+void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, MaskImage& out,
+                     RasterScratch& scratch, uint64_t* litPixels) {
+  assert(usableGrid(grid));
+  if (litPixels) *litPixels = 0;
+  const uint32_t width = grid.width, height = grid.height;
+  prepareImage(grid, out);  // with known extents only the previous image's lit spans are cleared
+  if (width == 0 || height == 0 || !usableGrid(grid)) return;
+
+  buildEdgeTable(sets, grid.y0, grid.pixel, height, scratch);
+  for (uint32_t j = 0; j < height; ++j) {
+    if (!hasWork(j, scratch)) continue;
+    const uint32_t r = grid.mirrorY ? height - 1 - j : j;
+    uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
+    advanceTo(j, samplePosition(grid.y0, grid.pixel, j), scratch);
+    uint32_t lo = width, hi = 0;
+    forEachSolidRun(scratch.active, [&](double xa, double xb) {
+      const uint32_t ia = firstSampleAtOrAbove(xa, grid.x0, grid.pixel, width);
+      const uint32_t ib = firstSampleAtOrAbove(xb, grid.x0, grid.pixel, width);
+      if (ia >= ib) return;
+      const uint32_t a = grid.mirrorX ? width - ib : ia, b = grid.mirrorX ? width - ia : ib;
+      std::memset(row + a, 255, b - a);
+      lo = std::min(lo, a);
+      hi = std::max(hi, b);
+      if (litPixels) *litPixels += ib - ia;
+    });
+    out.litBegin[r] = lo;
+    out.litEnd[r] = hi;
+  }
+}
+
+void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, MaskImage& out,
+                       RasterScratch& scratch, uint64_t* valueSum, const CoverageTransfer* transfer) {
+  assert(usableGrid(grid));
+  assert(transfer == nullptr || transfer->table == nullptr || transfer->table[0] == 0);
+  if (valueSum) *valueSum = 0;
+  const uint32_t width = grid.width, height = grid.height;
+  prepareImage(grid, out);
+  if (width == 0 || height == 0 || !usableGrid(grid)) return;
+
+  buildCoverageTable(sets, grid, scratch);
+  scratch.cells.assign(static_cast<std::size_t>(width) + 2, 0.0);
+  double* cells = scratch.cells.data();
+  std::vector<CoverageEdge>& active = scratch.coverageActive;
+  std::vector<CellSpan>& spans = scratch.spans;
+  const uint8_t* table = transfer ? transfer->table : nullptr;
+  const auto valueOf = [table](double a) {
+    const double scaled = std::clamp(a, 0.0, 1.0) * 255.0 + 0.5;
+    const auto v = static_cast<uint8_t>(scaled);
+    return table ? table[v] : v;
+  };
+
+  for (uint32_t j = 0; j < height; ++j) {
+    // Active edges: those overlapping row j, sorted by u at the row's bottom.
+    std::size_t kept = 0;
+    for (std::size_t i = 0; i < active.size(); ++i)
+      if (active[i].endRow > j) active[kept++] = active[i];
+    active.resize(kept);
+    active.insert(active.end(), scratch.coverageBucketed.begin() + scratch.coverageRowStart[j],
+                  scratch.coverageBucketed.begin() + scratch.coverageRowStart[j + 1]);
+    if (active.empty()) continue;
+    // Sorted by u at the row's bottom (nearly sorted from the row below), so that the chains are too.
+    for (CoverageEdge& e : active) e.x = edgeU(e, j);
+    sortNearlySorted(active, [](const CoverageEdge& e) { return e.x; });
+
+    spans.clear();
+    const double y0 = j, y1 = j + 1.0;
+    coverRow(active, y0, y1, width, scratch);
+    if (spans.empty()) continue;
+
+    // The row: prefix sums over the touched cells, constant runs between them.
+    const uint32_t r = grid.mirrorY ? height - 1 - j : j;
+    uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
+    uint32_t lo = width, hi = 0;  // lit extent, unmirrored
+    uint64_t sum = 0;
+    const auto fill = [&](uint32_t from, uint32_t to, uint8_t value) {
+      if (from >= to || value == 0) return;
+      std::memset(row + (grid.mirrorX ? width - to : from), value, to - from);
+      lo = std::min(lo, from);
+      hi = to;
+      sum += static_cast<uint64_t>(value) * (to - from);
+    };
+    double covered = 0.0;
+    uint32_t next = 0;  // first pixel not yet written
+    std::size_t s = 0;
+    while (s < spans.size()) {
+      const uint32_t begin = spans[s].begin;
+      uint32_t end = spans[s].end;
+      for (++s; s < spans.size() && spans[s].begin <= end + 1; ++s) end = std::max(end, spans[s].end);
+      fill(next, begin, valueOf(covered));
+      for (uint32_t i = begin; i <= end; ++i) {
+        covered += cells[i];
+        cells[i] = 0.0;
+        if (i >= width) break;
+        const uint8_t v = valueOf(covered);
+        if (v == 0) continue;
+        row[grid.mirrorX ? width - 1 - i : i] = v;
+        lo = std::min(lo, i);
+        hi = i + 1;
+        sum += v;
+      }
+      cells[width] = 0.0;
+      next = std::min(end + 1, width);
+    }
+    fill(next, width, valueOf(covered));
+    if (lo >= hi) continue;
+    uint32_t begin = grid.mirrorX ? width - hi : lo, end = grid.mirrorX ? width - lo : hi;
+    if (transfer && transfer->row) {
+      transfer->row(transfer->context, r, begin, end, row);
+      while (begin < end && row[begin] == 0) ++begin;
+      while (end > begin && row[end - 1] == 0) --end;
+      sum = 0;
+      for (uint32_t i = begin; i < end; ++i) sum += row[i];
+    }
+    if (begin < end) {
+      out.litBegin[r] = begin;
+      out.litEnd[r] = end;
+    }
+    if (valueSum) *valueSum += sum;
+  }
+}
+
+std::size_t countSkippedLoops(std::span<const ContourSet> sets) {
+  std::size_t skipped = 0;
+  for (const ContourSet& set : sets) {
+    const LayerContours& layer = *set.layer;
+    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+      if (layer.loopClosed[l] == 0 || !allFinite(layer.loopPoints(l))) ++skipped;
+    }
+  }
+  return skipped;
+}
+
+std::size_t countLitPixels(const MaskImage& mask) {
+  return static_cast<std::size_t>(
+      std::count_if(mask.pixels.begin(), mask.pixels.end(), [](uint8_t v) { return v != 0; }));
+}
+
+double maskArea(const MaskImage& mask, double pixel) {
+  // Blocks small enough for a 32-bit partial sum (255 * 65536 < 2^32), which the compiler vectorizes.
+  constexpr std::size_t kBlock = 65536;
+  const uint8_t* p = mask.pixels.data();
+  const std::size_t n = mask.pixels.size();
+  uint64_t sum = 0;
+  for (std::size_t at = 0; at < n; at += kBlock) {
+    const std::size_t end = std::min(n, at + kBlock);
+    uint32_t partial = 0;
+    for (std::size_t i = at; i < end; ++i) partial += p[i];
+    sum += partial;
+  }
+  return static_cast<double>(sum) / 255.0 * pixel * pixel;
+}
+
+}  // namespace toposlice
