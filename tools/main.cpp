@@ -10,6 +10,7 @@
 #include <thread>
 #include <vector>
 
+#include "core/edit_distance.h"
 #include "core/mesh/mesh_info.h"
 #include "core/mesh/weld.h"
 #include "core/number_text.h"
@@ -56,22 +57,6 @@ void endIfInterrupted() {
   std::fprintf(stderr, "toposlice: %s\n", gInterruptedMessage);
   std::signal(gSignal, SIG_DFL);
   std::raise(gSignal);
-}
-
-// Levenshtein distance, for "did you mean" on a mistyped command.
-std::size_t editDistance(const std::string& a, const std::string& b) {
-  std::vector<std::size_t> row(b.size() + 1);
-  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
-  for (std::size_t i = 1; i <= a.size(); ++i) {
-    std::size_t diagonal = row[0];
-    row[0] = i;
-    for (std::size_t j = 1; j <= b.size(); ++j) {
-      const std::size_t up = row[j];
-      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
-      diagonal = up;
-    }
-  }
-  return row[b.size()];
 }
 
 struct CommonOptions {
