@@ -244,9 +244,10 @@ void encodeExrMaskLayer(const MaskImage& mask, const MaskJob& job, uint32_t inde
   step([&] { return exr_attr_set_v2f(ctxt, part, "origin", &origin); });
   step([&] { return exr_attr_set_int(ctxt, part, "mirrorX", job.grid.mirrorX ? 1 : 0); });
   step([&] { return exr_attr_set_int(ctxt, part, "mirrorY", job.grid.mirrorY ? 1 : 0); });
-  for (const auto& [key, value] : job.settings) {  // the printer and material settings (mask_sink.h)
-    const std::string attribute = "ts:" + key;     // EXR attribute names have at most 31 bytes
-    step([&] { return exr_attr_set_string(ctxt, part, attribute.c_str(), value.c_str()); });
+  for (const auto& setting : job.settings) {              // the printer and material settings (mask_sink.h)
+    const std::string attribute = "ts:" + setting.first;  // EXR attribute names have at most 31 bytes
+    const char* text = setting.second.c_str();
+    step([&] { return exr_attr_set_string(ctxt, part, attribute.c_str(), text); });
   }
   step([&] { return exr_write_header(ctxt); });
   // All chunks are tokenized first, so that they share one Huffman code, planned once per layer.
