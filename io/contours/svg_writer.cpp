@@ -226,11 +226,7 @@ class SvgWriter final : public ContourSink {
         appendNumber(text_, stroke_ * 3, 4);
         text_ += "\" points=\"";
       } else {
-        text_ += "<polyline class=\"open\" fill=\"none\" stroke=\"";
-        text_ += kOpenStroke;
-        text_ += "\" stroke-width=\"";
-        appendNumber(text_, stroke_ * 1.5, 4);
-        text_ += "\" stroke-linecap=\"round\" points=\"";
+        appendOpenPolylineStart();
       }
       appendPointList(ox, oy, pts);
       text_ += "\"/>\n";
@@ -238,6 +234,15 @@ class SvgWriter final : public ContourSink {
     if (parts_.size() > 1) text_ += "</g>\n";
     for (std::size_t p = 1; p < layers.size(); ++p) appendFeatureGroup(ox, oy, index, p, layers[p]);
     text_ += "</g>\n";
+  }
+
+  // The start of an open polyline's element, up to its points (model and features draw them alike).
+  void appendOpenPolylineStart() {
+    text_ += "<polyline class=\"open\" fill=\"none\" stroke=\"";
+    text_ += kOpenStroke;
+    text_ += "\" stroke-width=\"";
+    appendNumber(text_, stroke_ * 1.5, 4);
+    text_ += "\" stroke-linecap=\"round\" points=\"";
   }
 
   // <g id="layer-<k>-part-<p+1>" class="part <role>"><title><role> <name></title> (ids as in the CLI).
@@ -280,11 +285,7 @@ class SvgWriter final : public ContourSink {
         }
         text_ += "\" points=\"";
       } else {
-        text_ += "<polyline class=\"open\" fill=\"none\" stroke=\"";
-        text_ += kOpenStroke;
-        text_ += "\" stroke-width=\"";
-        appendNumber(text_, stroke_ * 1.5, 4);
-        text_ += "\" stroke-linecap=\"round\" points=\"";
+        appendOpenPolylineStart();
       }
       appendPointList(ox, oy, pts, closed, removal);
       text_ += "\"/>\n";
