@@ -32,12 +32,6 @@ std::atomic<std::uint64_t> gTempCounter{0};
 
 thread_local OutputTransaction* tCurrentTransaction = nullptr;
 
-std::string lowerExtension(const std::filesystem::path& path) {
-  std::string ext = path.extension().string();
-  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return ext;
-}
-
 std::filesystem::path asideName(const std::filesystem::path& finalPath) {
   static std::atomic<std::uint64_t> counter{0};
   std::filesystem::path p = finalPath;
@@ -263,6 +257,12 @@ std::string writeFailureReason(const std::filesystem::path& file, int savedErrno
   if (::statvfs(folder.c_str(), &fs) == 0 && fs.f_bavail == 0)
     return reason(ENOSPC) + " (" + libraryMessage + ")";
   return libraryMessage;
+}
+
+std::string lowerExtension(const std::filesystem::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return ext;
 }
 
 std::string cannotCreateMessage(const std::filesystem::path& path, int err) {

@@ -111,6 +111,10 @@ std::string cannotCreateMessage(const std::filesystem::path& path, int err);
 std::string writeFailureReason(const std::filesystem::path& file, int savedErrno,
                                const std::string& libraryMessage);
 
+// The extension of `path` in lower case, with its dot (".cli"); empty when there is none. Output kinds
+// are chosen by it.
+std::string lowerExtension(const std::filesystem::path& path);
+
 // What an output is, for the overwrite check.
 enum class OutputKind { File, LayerFolder };
 

@@ -508,12 +508,11 @@ int run(int argc, char** argv) {
       return runBatch(jobPath, BatchRunOptions{common.quiet});
     }
     // Options that cannot apply to this job are errors, not silently ignored.
-    const bool anySvg = std::any_of(outputs.begin(), outputs.end(), [](const std::string& o) {
-      return std::filesystem::path(o).extension() == ".svg" || std::filesystem::path(o).extension() == ".SVG";
-    });
-    const bool anyCli = std::any_of(outputs.begin(), outputs.end(), [](const std::string& o) {
-      return std::filesystem::path(o).extension() == ".cli" || std::filesystem::path(o).extension() == ".CLI";
-    });
+    auto anyOutput = [&outputs](const char* ext) {
+      return std::any_of(outputs.begin(), outputs.end(),
+                         [ext](const std::string& o) { return lowerExtension(o) == ext; });
+    };
+    const bool anySvg = anyOutput(".svg"), anyCli = anyOutput(".cli");
     auto needs = [](bool given, bool applies, const char* option, const char* what) {
       if (given && !applies)
         throw InputError(std::string(option) + " does nothing in this job: it needs " + what);
