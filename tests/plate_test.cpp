@@ -259,6 +259,10 @@ TEST_F(PlateTest, BundledExampleIsFreshAndTheDemoJobRuns) {
   EXPECT_EQ(report.find("\"first_layer\": 1"), std::string::npos) << report;
   const std::string cli = readBytes(dir_ / "plate_demo.cli");
   EXPECT_NE(cli.find("$$LABEL/4,add named_arch_named_label"), std::string::npos);
+  // The printer file's previews show the plate, as PrusaSlicer names them.
+  const auto entries = tool_test::zipEntryNames(readBytes(dir_ / "plate_demo.sl1"));
+  for (const char* thumbnail : {"thumbnail/thumbnail400x400.png", "thumbnail/thumbnail800x480.png"})
+    EXPECT_NE(std::find(entries.begin(), entries.end(), thumbnail), entries.end()) << thumbnail;
 }
 
 }  // namespace

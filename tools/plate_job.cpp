@@ -207,7 +207,23 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     maskJob.layerHeight = job.layerHeight;
     struct stat info {};
     if (::stat(job.sourceFile.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
+    // The previews of the printer files (GOO, SL1 thumbnails, NanoDLP) show the plate: every part's model
+    // and add-ons where the plate puts them. The copy lives only while the sink renders it.
+    std::vector<Point3f> plateModel;
+    for (std::size_t m = 0; m < members.size(); ++m) {
+      const std::size_t p = members[m];
+      const PlatePartResult& placed = results[p];
+      const auto addPlaced = [&](const std::vector<Point3f>& corners) {
+        for (const Point3f& c : corners)
+          plateModel.push_back(
+              {static_cast<float>(c.x + placed.tx), static_cast<float>(c.y + placed.ty), c.z});
+      };
+      addPlaced(loaded[p].model.corners);
+      for (std::size_t f = 0; f < job.parts[p].add.size(); ++f) addPlaced(loaded[p].features[f].corners);
+    }
+    maskJob.previewModel = plateModel;
     maskSink = makeMaskSink(out, maskJob, job.overwrite);
+    maskJob.previewModel = {};
   }
 
   SliceSettings settings;
