@@ -19,6 +19,7 @@
 #include "core/slicing/slice_march.h"
 #include "io/masks/mask_png.h"
 #include "io/readers/stl_reader.h"
+#include "parallel/parallel.h"
 #include "tests/fixtures/models.h"
 
 namespace toposlice {
@@ -80,6 +81,27 @@ void BM_Adjacency(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(f.soup.facetCount()));
 }
 BENCHMARK(BM_Adjacency)->Unit(benchmark::kMillisecond);
+
+// The split forms (core/chunk_runner.h) on 1..N threads; Arg(1) is the split code on one thread.
+void BM_WeldSplit(benchmark::State& state) {
+  const Fixture& f = fixture();
+  ThreadLimit limit(static_cast<unsigned>(state.range(0)));
+  ChunkRunner runner = parallelChunkRunner();
+  runner.width = 2;  // the split form even on one thread
+  for (auto _ : state) benchmark::DoNotOptimize(weldCorners(f.soup.corners, runner).vertices.data());
+}
+BENCHMARK(BM_WeldSplit)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+void BM_AdjacencySplit(benchmark::State& state) {
+  const Fixture& f = fixture();
+  ThreadLimit limit(static_cast<unsigned>(state.range(0)));
+  ChunkRunner runner = parallelChunkRunner();
+  runner.width = 2;
+  std::vector<int32_t> table(f.soup.corners.size());
+  for (auto _ : state)
+    benchmark::DoNotOptimize(buildAdjacency(f.mesh.facetVertices, f.mesh.vertices.size(), table, runner));
+}
+BENCHMARK(BM_AdjacencySplit)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_FacetLayers(benchmark::State& state) {
   const Fixture& f = fixture();

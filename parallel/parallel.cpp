@@ -47,6 +47,13 @@ void parallelForChunks(std::size_t count, std::size_t grain,
   (void)handoff.load(std::memory_order_acquire);
 }
 
+ChunkRunner parallelChunkRunner() {
+  return ChunkRunner{[](std::size_t count, std::size_t grain, const ChunkBody& body) {
+                       parallelForChunks(count, grain, body);
+                     },
+                     ThreadLimit::available()};
+}
+
 void parallelInvoke(const std::function<void()>& a, const std::function<void()>& b) {
   std::exception_ptr errorA, errorB;
   tbb::parallel_invoke(

@@ -7,6 +7,8 @@
 #include <functional>
 #include <memory>
 
+#include "core/chunk_runner.h"
+
 namespace toposlice {
 
 // Limits the worker threads for the lifetime of the object (0 = all cores). One per process run.
@@ -27,6 +29,10 @@ class ThreadLimit {
 // `grain` indices. The body must write only slots it owns.
 void parallelForChunks(std::size_t count, std::size_t grain,
                        const std::function<void(std::size_t, std::size_t)>& body);
+
+// A runner for core kernels that split their work (core/chunk_runner.h): chunks on every thread the
+// current limit allows (width 1, the serial form, when that is one thread).
+ChunkRunner parallelChunkRunner();
 
 // Runs a() and b() at the same time when a second thread is free, and returns when both are done. When
 // either throws, the exception of a() is rethrown if it threw, else b()'s: the same error whatever the

@@ -7,6 +7,7 @@
 #include "core/mesh/weld.h"
 #include "io/errors.h"
 #include "io/readers/mesh_reader.h"
+#include "parallel/parallel.h"
 
 namespace toposlice {
 
@@ -16,8 +17,10 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     t.table = readTemplateFile(job.templateFile);
     t.source = "loaded " + job.templateFile.string();
   } else if (!job.templateModel.empty()) {
+    const ChunkRunner runner = parallelChunkRunner();
     t.table = buildTemplateTable(
-        weldCorners(readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale}).corners));
+        weldCorners(readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale}).corners, runner),
+        runner);
     t.source = "built from " + job.templateModel.string();
     if (save && !job.templateFile.empty()) {
       if (!job.templateFile.parent_path().empty())

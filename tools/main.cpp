@@ -134,9 +134,10 @@ void printBox(const BoundingBox& b) {
 int runInfo(const std::string& model, const MeshReadOptions& read) {
   MeshSource source;
   const FacetSoup soup = readMesh(model, read, &source);
-  const IndexedMesh mesh = weldCorners(soup.corners);
+  const ChunkRunner runner = parallelChunkRunner();
+  const IndexedMesh mesh = weldCorners(soup.corners, runner);
   std::vector<int32_t> table(soup.corners.size());
-  const EdgeStats edges = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
+  const EdgeStats edges = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table, runner);
   const double volume = signedVolume(soup.corners);
   std::string format = meshFormatName(source.format);
   if (source.format == MeshFormat::Stl || source.format == MeshFormat::Ply)
@@ -274,8 +275,8 @@ int runTemplate(const std::string& model, const MeshReadOptions& read, const std
   // interrupted run leaves no table, a finished one a complete table.
   OutputTransaction transaction;
   const FacetSoup soup = readMesh(model, read);
-  const IndexedMesh mesh = weldCorners(soup.corners);
-  const TemplateTable table = buildTemplateTable(mesh);
+  const ChunkRunner runner = parallelChunkRunner();
+  const TemplateTable table = buildTemplateTable(weldCorners(soup.corners, runner), runner);
   writeTemplateFile(output, table, force);
   transaction.commit(&interruptRequested());
   if (!quiet) {

@@ -69,9 +69,10 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
 }
 
 void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats) {
-  const IndexedMesh mesh = weldCorners(soup.corners);
+  const ChunkRunner runner = parallelChunkRunner();
+  const IndexedMesh mesh = weldCorners(soup.corners, runner);
   table.resize(soup.corners.size());
-  const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table);
+  const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table, runner);
   if (stats) *stats = s;
 }
 

@@ -1,7 +1,10 @@
 #include "core/mesh/weld.h"
 
+#include <algorithm>
 #include <bit>
 #include <cstring>
+#include <memory>
+#include <utility>
 
 namespace toposlice {
 namespace {
@@ -22,15 +25,14 @@ inline uint64_t hashKey(const CornerKey& k) {
   return h ^ (h >> 29);
 }
 
-}  // namespace
+constexpr uint32_t kEmpty = 0xFFFFFFFFu;
 
-IndexedMesh weldCorners(std::span<const Point3f> corners) {
+IndexedMesh weldSerially(std::span<const Point3f> corners) {
   IndexedMesh mesh;
   mesh.facetVertices.resize(corners.size());
   std::size_t capacity = 16;
   while (capacity < corners.size() * 2) capacity <<= 1;  // load factor <= 1/2 even with no sharing
   const uint64_t mask = capacity - 1;
-  constexpr uint32_t kEmpty = 0xFFFFFFFFu;
   std::vector<uint32_t> table(capacity, kEmpty);
   std::vector<CornerKey> keys;
   keys.reserve(corners.size() / 4 + 16);
@@ -57,6 +59,102 @@ IndexedMesh weldCorners(std::span<const Point3f> corners) {
     }
   }
   return mesh;
+}
+
+// The split weld. Corners are partitioned by their hash, so equal corners meet in one partition; each
+// partition, scanning the corners in order, finds every corner's first occurrence on its own; then the
+// first occurrences are numbered in corner order by a prefix sum. Every step writes only what its chunk
+// or partition owns, and the numbering is the serial one whatever ran the pieces or how many there are.
+IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runner) {
+  constexpr std::size_t kChunk = std::size_t{1} << 16;  // corners
+  const std::size_t n = corners.size(), chunks = (n + kChunk - 1) / kChunk;
+  const unsigned parts = std::min(64u, 2 * runner.width);
+  auto chunkEnd = [&](std::size_t c) { return std::min(n, (c + 1) * kChunk); };
+  const std::unique_ptr<uint8_t[]> part(new uint8_t[n]);
+  std::vector<uint32_t> partSize(chunks * parts, 0);
+  runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c)
+      for (std::size_t i = c * kChunk; i < chunkEnd(c); ++i) {
+        const auto p = static_cast<uint8_t>(((hashKey(keyOf(corners[i])) >> 32) * parts) >> 32);
+        part[i] = p;
+        ++partSize[c * parts + p];
+      }
+  });
+  const std::unique_ptr<uint32_t[]> first(new uint32_t[n]);  // the corner's first occurrence
+  std::vector<uint32_t> firsts(chunks * parts, 0);           // first occurrences per chunk and partition
+  runner.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
+    std::vector<uint32_t> members, table;  // the partition's corners; per slot an index into `seen` or kEmpty
+    std::vector<std::pair<CornerKey, uint32_t>> seen;  // each key met, with its first corner
+    for (std::size_t p = p0; p < p1; ++p) {
+      std::size_t size = 0;
+      for (std::size_t c = 0; c < chunks; ++c) size += partSize[c * parts + p];
+      std::size_t capacity = 16;
+      while (capacity < size * 2) capacity <<= 1;
+      const uint64_t mask = capacity - 1;
+      table.assign(capacity, kEmpty);
+      seen.clear();
+      seen.reserve(size / 4 + 16);
+      // The partition's corners in order, gathered without a branch (which partition a corner falls in
+      // is random, and a branch on it would be mispredicted half the time).
+      members.resize(size + 1);
+      std::size_t count = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        members[count] = static_cast<uint32_t>(i);
+        count += part[i] == p ? 1 : 0;
+      }
+      for (std::size_t m = 0; m < count; ++m) {
+        const std::size_t i = members[m];
+        const CornerKey key = keyOf(corners[i]);
+        for (uint64_t slot = hashKey(key) & mask;; slot = (slot + 1) & mask) {
+          const uint32_t k = table[slot];
+          if (k == kEmpty) {
+            table[slot] = static_cast<uint32_t>(seen.size());
+            seen.emplace_back(key, static_cast<uint32_t>(i));
+            first[i] = static_cast<uint32_t>(i);
+            ++firsts[(i / kChunk) * parts + p];
+            break;
+          }
+          const CornerKey& other = seen[k].first;
+          if (other.x == key.x && other.y == key.y && other.z == key.z) {
+            first[i] = seen[k].second;
+            break;
+          }
+        }
+      }
+    }
+  });
+  std::vector<uint32_t> base(chunks + 1, 0);  // vertices numbered before each chunk
+  for (std::size_t c = 0; c < chunks; ++c) {
+    base[c + 1] = base[c];
+    for (unsigned p = 0; p < parts; ++p) base[c + 1] += firsts[c * parts + p];
+  }
+  IndexedMesh mesh;
+  mesh.vertices.resize(base[chunks]);
+  mesh.facetVertices.resize(n);
+  runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c) {
+      uint32_t v = base[c];
+      for (std::size_t i = c * kChunk; i < chunkEnd(c); ++i)
+        if (first[i] == i) {
+          mesh.facetVertices[i] = v;
+          mesh.vertices[v++] = corners[i];
+        }
+    }
+  });
+  runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t i = c0 * kChunk; i < chunkEnd(c1 - 1); ++i)
+      if (first[i] != i) mesh.facetVertices[i] = mesh.facetVertices[first[i]];
+  });
+  return mesh;
+}
+
+}  // namespace
+
+IndexedMesh weldCorners(std::span<const Point3f> corners, const ChunkRunner& runner) {
+  constexpr std::size_t kSplitFrom = std::size_t{1}
+                                     << 17;  // corners; below, the split costs more than it saves
+  if (runner.width <= 1 || corners.size() < kSplitFrom) return weldSerially(corners);
+  return weldSplit(corners, runner);
 }
 
 }  // namespace toposlice

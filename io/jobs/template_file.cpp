@@ -261,14 +261,14 @@ uint64_t templateChecksum(std::span<const std::byte> headerAndEntries) {
   return hash.finish();
 }
 
-TemplateTable buildTemplateTable(const IndexedMesh& mesh) {
+TemplateTable buildTemplateTable(const IndexedMesh& mesh, const ChunkRunner& runner) {
   assert(mesh.facetCount() <= std::size_t{INT32_MAX});
   TemplateTable table;
   table.facetCount = static_cast<uint32_t>(mesh.facetCount());
   table.vertexCount = static_cast<uint32_t>(mesh.vertices.size());
   table.fingerprint = connectivityFingerprint(mesh.facetVertices);
   table.adjacency.resize(mesh.facetVertices.size());
-  buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table.adjacency);
+  buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table.adjacency, runner);
   return table;
 }
 

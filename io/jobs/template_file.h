@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 
 namespace toposlice {
@@ -48,7 +49,7 @@ uint64_t templateChecksum(std::span<const std::byte> headerAndEntries);
 // Builds the table of a welded template: buildAdjacency plus the fingerprint and counts. Entries are -1
 // at boundary, non-manifold, inconsistently oriented and degenerate edges (core/mesh/adjacency.h).
 // Precondition: mesh.facetCount() < 2^31 (entries are int32).
-TemplateTable buildTemplateTable(const IndexedMesh& mesh);
+TemplateTable buildTemplateTable(const IndexedMesh& mesh, const ChunkRunner& runner = serialChunkRunner());
 
 // Writes `table` to `path` through a temporary beside it, renamed into place when complete
 // (io/output_file.h), so a reader never sees a partial file. Throws OutputError when `path` exists and
