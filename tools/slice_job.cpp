@@ -592,6 +592,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   struct LayerResult {
     EncodedMaskLayer encoded;              // the mask as the sink encoded it (a PNG, an EXR file, mask runs)
     std::vector<LayerContours> corrected;  // with corrections: the corrected layer, then empty features
+    std::vector<TextBuffer> contourBytes;  // per contour sink that encodes its layers (CLI)
     double area = 0;
     uint64_t islands = 0;
   };
@@ -600,7 +601,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   };
   const BandPlan plan = planBands(planes.size(), options.slice);
   std::vector<SlotState> slots(plan.slots);
-  for (SlotState& s : slots) s.layers.resize(plan.bandLayers);
+  std::vector<const ContourSink*> encoding;  // contour sinks whose layers are made in the parallel stage
+  for (const auto& sink : sinks)
+    if (sink->encodesLayers()) encoding.push_back(sink.get());
+  for (SlotState& s : slots) {
+    s.layers.resize(plan.bandLayers);
+    for (LayerResult& r : s.layers) r.contourBytes.resize(encoding.size());
+  }
   double volumeMm3 = 0;
 
   LayerStages stages;
@@ -627,6 +634,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       for (std::size_t i = 1; i < sliced.size(); ++i) r.corrected[i].clear(sliced[i].z);
       layer = r.corrected;
     }
+    for (std::size_t i = 0; i < encoding.size(); ++i) encoding[i]->encodeLayer(layer, r.contourBytes[i]);
     if (!measureLayers) return;
     r.islands = 0;
     double modelArea = 0;
@@ -652,7 +660,12 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
                        uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
     if (correcting) layer = r.corrected;
-    for (auto& sink : sinks) sink->writeLayer(k, layer);
+    for (std::size_t i = 0, e = 0; i < sinks.size(); ++i) {
+      if (sinks[i]->encodesLayers())
+        sinks[i]->writeEncodedLayer(k, r.contourBytes[e++]);
+      else
+        sinks[i]->writeLayer(k, layer);
+    }
     if (maskSink) maskSink->writeEncodedLayer(k, planes[k], r.encoded);
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
     volumeMm3 += r.area * layerThickness(planes, k, options.planes);

@@ -33,24 +33,20 @@ constexpr int kDecimals = 6;
 // Longest fixed-notation double with kDecimals decimals: sign, 309 digits, point, decimals.
 constexpr std::size_t kMaxFixedChars = 1 + 309 + 1 + kDecimals;
 
-// The CLI writer's buffer: TextBuffer plus the format's fixed-decimal numbers.
-class ByteBuffer : public TextBuffer {
- public:
-  // Fixed notation, kDecimals decimals; a value that rounds to zero is written without a minus sign.
-  void appendFixed(double v) {
-    char* p = reserveMore(kMaxFixedChars);
-    char* end = std::to_chars(p, p + kMaxFixedChars, v, std::chars_format::fixed, kDecimals).ptr;
-    if (*p == '-' && v > -1e-6) {
-      bool zero = true;
-      for (const char* c = p + 1; c < end; ++c) zero = zero && (*c == '0' || *c == '.');
-      if (zero) {
-        std::memmove(p, p + 1, static_cast<std::size_t>(end - p - 1));
-        --end;
-      }
+// Fixed notation, kDecimals decimals; a value that rounds to zero is written without a minus sign.
+void appendFixed(TextBuffer& buf, double v) {
+  char* p = buf.reserveMore(kMaxFixedChars);
+  char* end = std::to_chars(p, p + kMaxFixedChars, v, std::chars_format::fixed, kDecimals).ptr;
+  if (*p == '-' && v > -1e-6) {
+    bool zero = true;
+    for (const char* c = p + 1; c < end; ++c) zero = zero && (*c == '0' || *c == '.');
+    if (zero) {
+      std::memmove(p, p + 1, static_cast<std::size_t>(end - p - 1));
+      --end;
     }
-    setEnd(end);
   }
-};
+  buf.setEnd(end);
+}
 
 template <typename T>
 char* storeLE(char* p, T value) {
@@ -90,7 +86,7 @@ std::string sanitizeLabel(const std::string& name) {
   return out.empty() ? std::string("part") : out;
 }
 
-void appendHeader(ByteBuffer& buf, const ContourJob& job, bool binary) {
+void appendHeader(TextBuffer& buf, const ContourJob& job, bool binary) {
   buf.append("$$HEADERSTART\n");
   buf.append(binary ? "$$BINARY\n" : "$$ASCII\n");
   buf.append("$$UNITS/00000001.000000\n");
@@ -113,7 +109,7 @@ void appendHeader(ByteBuffer& buf, const ContourJob& job, bool binary) {
                          job.bounds.max.x, job.bounds.max.y, job.bounds.max.z};
   for (int i = 0; i < 6; ++i) {
     if (i > 0) buf.append(',');
-    buf.appendFixed(static_cast<double>(dims[i]));
+    appendFixed(buf, static_cast<double>(dims[i]));
   }
   buf.append("\n$$LAYERS/");
   buf.appendInt(job.layerCount);
@@ -132,33 +128,43 @@ class CliWriter final : public ContourSink {
     file_.write(buf_.data(), buf_.size());
   }
 
-  void writeLayer(uint32_t index, std::span<const LayerContours> parts) override {
-    assert(index == nextLayer_ && index < layerCount_);
+  bool encodesLayers() const override { return true; }
+
+  void encodeLayer(std::span<const LayerContours> parts, TextBuffer& buf) const override {
     assert(parts.size() == reversed_.size());
-    (void)index;
-    ++nextLayer_;
-    buf_.clear();
+    buf.clear();
     const double z = parts[0].z;
     if (binary_) {
-      char* p = buf_.reserveMore(2 + 4);
+      char* p = buf.reserveMore(2 + 4);
       p = storeLE(p, kCmdLayerLong);
-      buf_.setEnd(storeLE(p, static_cast<float>(z)));
+      buf.setEnd(storeLE(p, static_cast<float>(z)));
     } else {
-      buf_.append("$$LAYER/");
-      buf_.appendFixed(z);
-      buf_.append('\n');
+      buf.append("$$LAYER/");
+      appendFixed(buf, z);
+      buf.append('\n');
     }
     for (std::size_t i = 0; i < parts.size(); ++i) {
       const LayerContours& layer = parts[i];
       assert(layer.loopClosed.size() == layer.loopCount());
       const int32_t id = kModelId + static_cast<int32_t>(i);
       if (binary_) {
-        encodeBinary(layer, id, reversed_[i]);
+        encodeBinary(buf, layer, id, reversed_[i]);
       } else {
-        encodeAscii(layer, id, reversed_[i]);
+        encodeAscii(buf, layer, id, reversed_[i]);
       }
     }
-    file_.write(buf_.data(), buf_.size());
+  }
+
+  void writeEncodedLayer(uint32_t index, const TextBuffer& bytes) override {
+    assert(index == nextLayer_ && index < layerCount_);
+    (void)index;
+    ++nextLayer_;
+    file_.write(bytes.data(), bytes.size());
+  }
+
+  void writeLayer(uint32_t index, std::span<const LayerContours> parts) override {
+    encodeLayer(parts, buf_);
+    writeEncodedLayer(index, buf_);
   }
 
   void finish() override {
@@ -169,43 +175,43 @@ class CliWriter final : public ContourSink {
 
  private:
   // One line per loop of one part.
-  void encodeAscii(const LayerContours& layer, int32_t id, bool reversed) {
+  static void encodeAscii(TextBuffer& buf, const LayerContours& layer, int32_t id, bool reversed) {
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const auto pts = layer.loopPoints(l);
       if (pts.empty()) continue;
       const bool closed = layer.loopClosed[l] != 0;
-      buf_.append("$$POLYLINE/");
-      buf_.appendInt(id);
-      buf_.append(',');
-      buf_.appendInt(loopDir(layer, l, reversed));
-      buf_.append(',');
-      buf_.appendInt(static_cast<int64_t>(pts.size() + (closed ? 1 : 0)));
+      buf.append("$$POLYLINE/");
+      buf.appendInt(id);
+      buf.append(',');
+      buf.appendInt(loopDir(layer, l, reversed));
+      buf.append(',');
+      buf.appendInt(static_cast<int64_t>(pts.size() + (closed ? 1 : 0)));
       for (std::size_t i = 0; i < pts.size(); ++i) {
         const Point2d& q = pts[writtenIndex(i, pts.size(), closed, reversed)];
-        buf_.append(',');
-        buf_.appendFixed(q.x);
-        buf_.append(',');
-        buf_.appendFixed(q.y);
+        buf.append(',');
+        appendFixed(buf, q.x);
+        buf.append(',');
+        appendFixed(buf, q.y);
       }
       if (closed) {
-        buf_.append(',');
-        buf_.appendFixed(pts[0].x);
-        buf_.append(',');
-        buf_.appendFixed(pts[0].y);
+        buf.append(',');
+        appendFixed(buf, pts[0].x);
+        buf.append(',');
+        appendFixed(buf, pts[0].y);
       }
-      buf_.append('\n');
+      buf.append('\n');
     }
   }
 
   // The polylines of one part: sized first, then filled in one pass.
-  void encodeBinary(const LayerContours& layer, int32_t id, bool reversed) {
+  static void encodeBinary(TextBuffer& buf, const LayerContours& layer, int32_t id, bool reversed) {
     constexpr std::size_t kPolylineBytes = 2 + 3 * 4, kPointBytes = 2 * 4;
     std::size_t bytes = 0;
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const std::size_t n = layer.loopOffsets[l + 1] - layer.loopOffsets[l];
       if (n > 0) bytes += kPolylineBytes + kPointBytes * (n + (layer.loopClosed[l] ? 1 : 0));
     }
-    char* p = buf_.reserveMore(bytes);
+    char* p = buf.reserveMore(bytes);
     char* const end = p + bytes;
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       const auto pts = layer.loopPoints(l);
@@ -227,7 +233,7 @@ class CliWriter final : public ContourSink {
       }
     }
     assert(p == end);
-    buf_.setEnd(end);
+    buf.setEnd(end);
   }
 
   OutputFile file_;
@@ -235,7 +241,7 @@ class CliWriter final : public ContourSink {
   uint32_t layerCount_;
   uint32_t nextLayer_ = 0;
   std::vector<bool> reversed_;  // per part: a removal's loops are written reversed
-  ByteBuffer buf_;
+  TextBuffer buf_;              // writeLayer's layer bytes
 };
 
 }  // namespace

@@ -19,6 +19,7 @@
 
 #include "core/mesh/mesh.h"
 #include "core/slicing/contours.h"
+#include "io/text_buffer.h"
 
 namespace toposlice {
 
@@ -55,6 +56,19 @@ class ContourSink {
   virtual void writeLayer(uint32_t index, std::span<const LayerContours> parts) = 0;
   // A job without features: the model's layer alone.
   void writeLayer(uint32_t index, const LayerContours& model) { writeLayer(index, {&model, 1}); }
+  // Formats whose layers are independent byte ranges (CLI) split writeLayer in two, so the in-order stage
+  // only copies bytes: encodeLayer makes a layer's bytes in the parallel stage (const, any thread, any
+  // order), and writeEncodedLayer writes them, called like writeLayer (every layer, in layer order).
+  // writeLayer(k, parts) is the same as both in turn.
+  virtual bool encodesLayers() const { return false; }
+  virtual void encodeLayer(std::span<const LayerContours> parts, TextBuffer& bytes) const {
+    (void)parts;
+    (void)bytes;
+  }
+  virtual void writeEncodedLayer(uint32_t index, const TextBuffer& bytes) {
+    (void)index;
+    (void)bytes;
+  }
   // Completes and commits the file; without finish() nothing is left on disk.
   virtual void finish() = 0;
 };
