@@ -54,6 +54,7 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
   SliceJobOptions o;
   o.read.unitMm = job.unitMm;
   o.read.scale = job.scale;
+  o.read.runner = parallelChunkRunner();
   o.planes.layerHeight = job.layerHeight;
   o.planes.layers = job.layers;
   o.planes.z0 = job.z0;

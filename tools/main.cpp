@@ -82,6 +82,7 @@ MeshReadOptions meshReadOptions(const CommonOptions& common) {
   if (!std::isfinite(common.scale) || !(common.scale > 0))
     throw InputError("--scale " + std::to_string(common.scale) + ": expected a factor > 0");
   read.scale = common.scale;
+  read.runner = parallelChunkRunner();
   return read;
 }
 

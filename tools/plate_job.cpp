@@ -387,6 +387,7 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
   MeshReadOptions read;
   read.unitMm = job.unitMm;
   read.scale = job.scale;
+  read.runner = parallelChunkRunner();
   std::vector<LoadedPart> loaded(count);
   std::vector<std::string> errors(count);
   result.parts.resize(count);

@@ -131,7 +131,7 @@ FacetSoup parseInflated(std::span<const std::byte> bytes, const std::string& nam
     case Detected::kStl: {
       source.format = MeshFormat::Stl;
       StlSource stl;
-      soup = parseStlUncompressed(bytes, name, &stl);
+      soup = parseStlUncompressed(bytes, name, &stl, options.runner);
       source.binary = stl.binary;
       source.name = stl.solidName;
       break;

@@ -35,6 +35,7 @@
 #include <span>
 #include <string>
 
+#include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 
 namespace toposlice {
@@ -51,8 +52,9 @@ struct MeshSource {
 };
 
 struct MeshReadOptions {
-  std::optional<double> unitMm;  // user's --units: the length of one file unit in mm
-  double scale = 1.0;            // user's --scale: multiplies every coordinate after units
+  std::optional<double> unitMm;              // user's --units: the length of one file unit in mm
+  double scale = 1.0;                        // user's --scale: multiplies every coordinate after units
+  ChunkRunner runner = serialChunkRunner();  // STL parsing in parallel chunks (stl_reader.h) when parallel
 };
 
 // Reads a mesh file of any supported format, optionally gzip-compressed (see the contract above).

@@ -11,6 +11,7 @@
 #include <string_view>
 #include <system_error>
 
+#include "io/errors.h"
 #include "io/readers/byte_input.h"
 
 namespace toposlice {
@@ -77,6 +78,20 @@ bool appendBinaryFacets(const std::byte* records, std::size_t count, std::vector
   return anyNonFinite;
 }
 
+// The parts, in order, as one array (copied side by side).
+void joinParts(std::vector<std::vector<Point3f>>& parts, std::vector<Point3f>& out,
+               const ChunkRunner& runner) {
+  std::vector<std::size_t> at(parts.size() + 1, out.size());
+  for (std::size_t c = 0; c < parts.size(); ++c) at[c + 1] = at[c] + parts[c].size();
+  out.resize(at.back());
+  runner.run(parts.size(), 1, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c) {
+      std::copy(parts[c].begin(), parts[c].end(), out.begin() + static_cast<std::ptrdiff_t>(at[c]));
+      std::vector<Point3f>().swap(parts[c]);
+    }
+  });
+}
+
 [[noreturn]] void failFirstNonFinite(const std::vector<Point3f>& corners, const std::string& name) {
   std::size_t i = 0;
   while (i + 1 < corners.size() && std::isfinite(corners[i].x) && std::isfinite(corners[i].y) &&
@@ -86,16 +101,36 @@ bool appendBinaryFacets(const std::byte* records, std::size_t count, std::vector
   fail(name, "facet " + std::to_string(i / 3) + ": non-finite coordinate (NaN or infinity)");
 }
 
-// `bytes` is exactly 84 + 50 * facetCount long.
+// `bytes` is exactly 84 + 50 * facetCount long. With a parallel runner, chunks of records are
+// converted side by side, each into its own part of the soup.
 void parseBinary(std::span<const std::byte> bytes, uint32_t facetCount, const std::string& name,
-                 StlSource& source, FacetSoup& soup) {
+                 StlSource& source, FacetSoup& soup, const ChunkRunner& runner) {
   source.binary = true;
   source.solidName = headerName(bytes.data());
   if (facetCount == 0) fail(name, "contains no facets");
-  soup.corners.reserve(std::size_t{facetCount} * 3);
-  if (appendBinaryFacets(bytes.data() + kBinaryPrefixBytes, facetCount, soup.corners)) {
-    failFirstNonFinite(soup.corners, name);
+  constexpr std::size_t kChunkFacets = 1 << 15;
+  if (runner.width <= 1 || facetCount < 4 * kChunkFacets) {
+    soup.corners.reserve(std::size_t{facetCount} * 3);
+    if (appendBinaryFacets(bytes.data() + kBinaryPrefixBytes, facetCount, soup.corners))
+      failFirstNonFinite(soup.corners, name);
+    return;
   }
+  const std::size_t chunks = (facetCount + kChunkFacets - 1) / kChunkFacets;
+  std::vector<std::vector<Point3f>> parts(chunks);
+  std::vector<uint8_t> nonFinite(chunks, 0);
+  runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c) {
+      const std::size_t first = c * kChunkFacets,
+                        count = std::min<std::size_t>(kChunkFacets, facetCount - first);
+      parts[c].reserve(3 * count);
+      nonFinite[c] =
+          appendBinaryFacets(bytes.data() + kBinaryPrefixBytes + first * kBinaryFacetBytes, count, parts[c]);
+    }
+  });
+  joinParts(parts, soup.corners, runner);
+  source.pieces = chunks;
+  if (std::find(nonFinite.begin(), nonFinite.end(), 1) != nonFinite.end())
+    failFirstNonFinite(soup.corners, name);
 }
 
 // A gzip-compressed binary STL, decompressed a cache-sized chunk at a time straight into the soup
@@ -173,6 +208,7 @@ class Lexer {
     skipSpace();
     return p_ == end_;
   }
+  std::string_view rest() const { return {p_, static_cast<std::size_t>(end_ - p_)}; }
   std::size_t line() const { return tokenLine_; }
 
  private:
@@ -222,12 +258,23 @@ NumberRead readFloat(std::string_view token, float& value) {
 class AsciiParser {
  public:
   AsciiParser(std::string_view text, const std::string& name)
-      : lexer_(text.data(), text.data() + text.size()), name_(name) {}
+      : text_(text), lexer_(text.data(), text.data() + text.size()), name_(&name) {}
 
-  void parse(StlSource& source, FacetSoup& soup, std::size_t textBytes) {
+  void parse(StlSource& source, FacetSoup& soup, std::size_t textBytes, const ChunkRunner& runner) {
+    bool first = true;
+    if (runner.width > 1 && textBytes >= kSplitTextFrom) {
+      // The common file, one solid of well-formed facets, is read in parallel pieces; anything the
+      // pieces do not accept (an error, a second solid) is read again here, serially, which names it.
+      if (!lexer_.consumePrefix("solid")) failAtLine("expected 'solid', found " + quoteToken(lexer_.next()));
+      const std::string_view solidName = lexer_.restOfLine();
+      if (parseSplit(lexer_.rest(), soup, runner, source.pieces)) {
+        source.solidName.assign(solidName);
+        return;
+      }
+      *this = AsciiParser(text_, *name_);
+    }
     // A facet takes 250 bytes in common writers' output, 90 at the least.
     soup.corners.reserve(3 * (textBytes / 192 + 1));
-    bool first = true;
     while (true) {
       if (!lexer_.consumePrefix("solid")) {
         failAtLine("expected 'solid', found " + quoteToken(lexer_.next()));
@@ -283,8 +330,8 @@ class AsciiParser {
       ++vertexCount;
     }
     if (vertexCount != 3) {
-      fail(name_, "facet " + std::to_string(facetIndex_) + " (line " + std::to_string(facetLine) +
-                      "): " + std::to_string(vertexCount) + " vertices, expected 3");
+      fail(*name_, "facet " + std::to_string(facetIndex_) + " (line " + std::to_string(facetLine) +
+                       "): " + std::to_string(vertexCount) + " vertices, expected 3");
     }
     expectKeyword("endfacet");
     soup.corners.push_back(corners[0]);
@@ -316,15 +363,78 @@ class AsciiParser {
   }
 
   [[noreturn]] void failInFacet(const std::string& what) const {
-    fail(name_,
+    fail(*name_,
          "facet " + std::to_string(facetIndex_) + " (line " + std::to_string(lexer_.line()) + "): " + what);
   }
   [[noreturn]] void failAtLine(const std::string& what) const {
-    fail(name_, "line " + std::to_string(lexer_.line()) + ": " + what);
+    fail(*name_, "line " + std::to_string(lexer_.line()) + ": " + what);
   }
 
+  // The facets after the first solid's name line, in pieces cut before a "facet" keyword, each read by
+  // its own parser. True when every piece held only whole facets and the last ended with endsolid (or
+  // the text's end): the soup is then what the serial parse gives. False for anything else.
+  bool parseSplit(std::string_view body, FacetSoup& soup, const ChunkRunner& runner,
+                  std::size_t& pieceCount) const {
+    const std::size_t pieces = std::max<std::size_t>(2, body.size() / kSplitPieceBytes);
+    std::vector<std::size_t> cut{0};
+    for (std::size_t k = 1; k < pieces; ++k) {
+      const std::size_t at = nextFacetKeyword(body, std::max(cut.back(), k * body.size() / pieces));
+      if (at >= body.size()) break;
+      if (at > cut.back()) cut.push_back(at);
+    }
+    cut.push_back(body.size());
+    const std::size_t count = cut.size() - 1;
+    std::vector<std::vector<Point3f>> parts(count);
+    std::vector<uint8_t> accepted(count, 0);
+    runner.run(count, 1, [&](std::size_t c0, std::size_t c1) {
+      for (std::size_t c = c0; c < c1; ++c) {
+        FacetSoup piece;
+        piece.corners.reserve(3 * ((cut[c + 1] - cut[c]) / 192 + 1));
+        AsciiParser parser(body.substr(cut[c], cut[c + 1] - cut[c]), *name_);
+        try {
+          accepted[c] = parser.parseFacetsOnly(piece, c + 1 == count) ? 1 : 0;
+        } catch (const InputError&) {
+          accepted[c] = 0;  // the serial read names it
+        }
+        parts[c] = std::move(piece.corners);
+      }
+    });
+    if (std::find(accepted.begin(), accepted.end(), 0) != accepted.end()) return false;
+    joinParts(parts, soup.corners, runner);
+    pieceCount = count;
+    return !soup.corners.empty();
+  }
+
+  // A piece of a split read: facets only; the last piece may end with endsolid and its name line.
+  bool parseFacetsOnly(FacetSoup& soup, bool last) {
+    for (;;) {
+      const std::string_view token = lexer_.next();
+      if (token.empty()) return true;
+      if (isKeyword(token, "facet")) {
+        parseFacet(soup);
+        continue;
+      }
+      if (!last || !isKeyword(token, "endsolid")) return false;
+      lexer_.restOfLine();
+      return lexer_.atEnd();
+    }
+  }
+
+  // The offset of the first "facet" keyword (any case, whitespace on both sides) at or after `from`.
+  static std::size_t nextFacetKeyword(std::string_view body, std::size_t from) {
+    for (std::size_t at = from; at + 6 <= body.size(); ++at) {
+      if ((body[at] | 0x20) != 'f' || at == 0 || !isSpace(body[at - 1])) continue;
+      if (isKeyword(body.substr(at, 5), "facet") && isSpace(body[at + 5])) return at;
+    }
+    return body.size();
+  }
+
+  static constexpr std::size_t kSplitTextFrom = std::size_t{4} << 20;  // bytes: smaller texts read serially
+  static constexpr std::size_t kSplitPieceBytes = std::size_t{1} << 20;
+
+  std::string_view text_;
   Lexer lexer_;
-  const std::string& name_;
+  const std::string* name_;
   std::size_t facetIndex_ = 0;
 };
 
@@ -340,7 +450,8 @@ bool startsWithSolid(std::string_view text) {
   return true;
 }
 
-FacetSoup parseUncompressed(std::span<const std::byte> bytes, const std::string& name, StlSource& source) {
+FacetSoup parseUncompressed(std::span<const std::byte> bytes, const std::string& name, StlSource& source,
+                            const ChunkRunner& runner = serialChunkRunner()) {
   if (bytes.empty()) fail(name, "empty file");
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
   FacetSoup soup;
@@ -351,7 +462,7 @@ FacetSoup parseUncompressed(std::span<const std::byte> bytes, const std::string&
     facetCount = loadLe32(bytes.data() + kBinaryHeaderBytes);
     binaryBytes = kBinaryPrefixBytes + uint64_t{kBinaryFacetBytes} * facetCount;
     if (binaryBytes == bytes.size()) {
-      parseBinary(bytes, facetCount, name, source, soup);
+      parseBinary(bytes, facetCount, name, source, soup, runner);
       return soup;
     }
   }
@@ -363,7 +474,7 @@ FacetSoup parseUncompressed(std::span<const std::byte> bytes, const std::string&
   // ASCII STL never holds a NUL byte; a "solid" header padded with NULs is a binary file.
   const bool nulInPrefix = text.substr(0, kBinaryPrefixBytes).find('\0') != std::string_view::npos;
   if (startsWithSolid(afterMark.substr(start)) && !nulInPrefix) {
-    AsciiParser(afterMark, name).parse(source, soup, text.size());  // counts the leading lines too
+    AsciiParser(afterMark, name).parse(source, soup, text.size(), runner);  // counts the leading lines too
     if (soup.corners.empty()) fail(name, "contains no facets");
     return soup;
   }
@@ -399,11 +510,12 @@ FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, St
   return parseUncompressed(bytes, name, out);
 }
 
-FacetSoup parseStlUncompressed(std::span<const std::byte> bytes, const std::string& name, StlSource* source) {
+FacetSoup parseStlUncompressed(std::span<const std::byte> bytes, const std::string& name, StlSource* source,
+                               const ChunkRunner& runner) {
   StlSource local;
   StlSource& out = source ? *source : local;
   out = StlSource{};
-  return parseUncompressed(bytes, name, out);
+  return parseUncompressed(bytes, name, out, runner);
 }
 
 FacetSoup readStl(const std::filesystem::path& path, StlSource* source) {

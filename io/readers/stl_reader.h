@@ -58,14 +58,16 @@
 #include <span>
 #include <string>
 
+#include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 
 namespace toposlice {
 
 struct StlSource {
-  bool binary = false;    // binary STL (else ASCII)
-  bool gzip = false;      // the bytes were gzip-compressed
-  std::string solidName;  // ASCII: first solid's name; binary: the header up to its first NUL, trimmed
+  bool binary = false;     // binary STL (else ASCII)
+  bool gzip = false;       // the bytes were gzip-compressed
+  std::string solidName;   // ASCII: first solid's name; binary: the header up to its first NUL, trimmed
+  std::size_t pieces = 1;  // how many pieces were read side by side (a parallel runner, a large file)
 };
 
 // Reads a binary or ASCII STL, optionally gzip-compressed. Throws InputError("<path>: <what is wrong>")
@@ -77,7 +79,10 @@ FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, St
 
 // Same, for bytes already inflated (the mesh reader, io/readers/mesh_reader.h): no gzip detection, and
 // StlSource::gzip stays false.
+// With a parallel runner (core/chunk_runner.h), a large binary file is converted in parallel chunks and a
+// large ASCII file of one solid read in parallel pieces cut before "facet" keywords; anything a piece
+// does not accept is read again serially, so results and error messages are the serial ones.
 FacetSoup parseStlUncompressed(std::span<const std::byte> bytes, const std::string& name,
-                               StlSource* source = nullptr);
+                               StlSource* source = nullptr, const ChunkRunner& runner = serialChunkRunner());
 
 }  // namespace toposlice
