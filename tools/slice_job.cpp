@@ -475,19 +475,31 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   SliceJobResult result;
   auto start = std::chrono::steady_clock::now();
   FacetSoup soup;
-  // A template file is read (and its checksum checked) on a second thread while the model is read.
+  // The model, its features and the template file (its checksum checked) are read side by side; the
+  // first input in that order that fails is the one reported, whatever the timing.
   TemplateTable loadedTemplate;
   const TemplateTable* templateTable = options.templateTable;
-  if (templateTable == nullptr && !options.templateFile.empty()) {
-    parallelInvoke([&] { loadedTemplate = readTemplateFile(options.templateFile); },
-                   [&] { soup = readMesh(model, options.read, &result.source); });
-    templateTable = &loadedTemplate;
-  } else {
-    soup = readMesh(model, options.read, &result.source);
-  }
-  std::vector<FacetSoup> features;  // add-ons first, then removals
-  for (const auto* list : {&options.add, &options.remove})
-    for (const auto& path : *list) features.push_back(readMesh(path, options.read));
+  const bool readTemplate = templateTable == nullptr && !options.templateFile.empty();
+  std::vector<std::filesystem::path> featurePaths(options.add.begin(), options.add.end());
+  featurePaths.insert(featurePaths.end(), options.remove.begin(), options.remove.end());
+  std::vector<FacetSoup> features(featurePaths.size());  // add-ons first, then removals
+  const std::size_t reads = 1 + featurePaths.size() + (readTemplate ? 1 : 0);
+  std::vector<std::exception_ptr> readErrors(reads);
+  parallelForChunks(reads, 1, [&](std::size_t i0, std::size_t i1) {
+    for (std::size_t i = i0; i < i1; ++i) try {
+        if (i == 0)
+          soup = readMesh(model, options.read, &result.source);
+        else if (i <= featurePaths.size())
+          features[i - 1] = readMesh(featurePaths[i - 1], options.read);
+        else
+          loadedTemplate = readTemplateFile(options.templateFile);
+      } catch (...) {
+        readErrors[i] = std::current_exception();
+      }
+  });
+  for (const std::exception_ptr& error : readErrors)
+    if (error) std::rethrow_exception(error);
+  if (readTemplate) templateTable = &loadedTemplate;
   result.readSeconds = secondsSince(start);
   result.facets = soup.facetCount();
   SoupMeasures measures = measureSoup(soup.corners);
