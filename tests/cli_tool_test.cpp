@@ -105,6 +105,77 @@ TEST_F(CliToolInfo, ExamplePartIsClosedWithThreeShells) {
   EXPECT_TRUE(r.err.empty()) << r.describe();
 }
 
+// The committed example is what its generator makes (examples/generate_example_part.cpp).
+TEST_F(CliToolInfo, ExamplePartIsFreshFromItsGenerator) {
+  const fs::path generator =
+      toposliceBinary().parent_path().parent_path() / "tests" / "generate_example_part";
+  ASSERT_TRUE(fs::exists(generator)) << generator;
+  ASSERT_EQ(std::system((generator.string() + " " + path("fresh.stl").string()).c_str()), 0);
+  EXPECT_TRUE(readBytes(path("fresh.stl")) == readBytes(examplePart()))
+      << "examples/example_part.stl differs from a fresh one: run "
+         "build/tests/generate_example_part examples/example_part.stl";
+}
+
+// Nothing in the bundled example is unprintable: every layer from the first (on the plate) to the last
+// holds part of the model (10 um layers, by the report), and every island of a layer's mask rests on
+// something lit in the layer below (50 um layers, 50 um pixels, 4-connected islands).
+TEST_F(CliToolInfo, ExamplePartHasNoEmptyLayerAndNoFloatingIsland) {
+  const RunResult report = run({"slice", examplePart().string(), "-H", "0.01", "--report", "r.csv", "-q"});
+  ASSERT_EQ(report.code(), 0) << report.describe();
+  const auto lines = splitLines(readBytes(path("r.csv")));
+  EXPECT_EQ(lines.size(), 620u + 1u);  // ceil(6.2 / 0.01) layers, from z 0 to the torus's top
+  ASSERT_GE(lines.size(), 2u);
+  EXPECT_TRUE(lines[1].starts_with("0,0.005000,")) << lines[1];
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    std::vector<std::string> fields;
+    std::istringstream row(lines[i]);
+    for (std::string f; std::getline(row, f, ',');) fields.push_back(f);
+    ASSERT_EQ(fields.size(), 5u) << lines[i];
+    EXPECT_GT(std::stoul(fields[3]), 0u) << "empty layer: " << lines[i];
+    EXPECT_GT(std::stod(fields[2]), 0.0) << "empty layer: " << lines[i];
+  }
+
+  const RunResult masks = run({"slice", examplePart().string(), "-H", "0.05", "--masks", "m", "--pixel",
+                               "0.05", "--resolution", "400x300", "-q"});
+  ASSERT_EQ(masks.code(), 0) << masks.describe();
+  std::vector<fs::path> files;
+  for (const auto& e : fs::directory_iterator(path("m"))) files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  EXPECT_EQ(files.size(), 124u);  // ceil(6.2 / 0.05)
+  MaskImage below, layer;
+  for (std::size_t k = 0; k < files.size(); ++k) {
+    const std::string png = readBytes(files[k]);
+    ASSERT_TRUE(decodeMaskPng({reinterpret_cast<const uint8_t*>(png.data()), png.size()}, layer)) << files[k];
+    if (k > 0) {
+      // Flood every island; it must cover at least one pixel lit in the layer below.
+      const uint32_t w = layer.width, h = layer.height;
+      std::vector<uint8_t> seen(layer.pixels.size(), 0);
+      std::vector<std::size_t> stack;
+      uint32_t islands = 0;
+      for (std::size_t start = 0; start < layer.pixels.size(); ++start) {
+        if (layer.pixels[start] == 0 || seen[start]) continue;
+        ++islands;
+        bool rests = false;
+        seen[start] = 1;
+        stack.assign(1, start);
+        while (!stack.empty()) {
+          const std::size_t p = stack.back();
+          stack.pop_back();
+          rests = rests || below.pixels[p] != 0;
+          const uint32_t x = static_cast<uint32_t>(p % w), y = static_cast<uint32_t>(p / w);
+          for (const std::size_t q :
+               {x > 0 ? p - 1 : p, x + 1 < w ? p + 1 : p, y > 0 ? p - w : p, y + 1 < h ? p + w : p})
+            if (layer.pixels[q] != 0 && !seen[q]) seen[q] = 1, stack.push_back(q);
+        }
+        EXPECT_TRUE(rests) << files[k].filename() << ": island " << islands
+                           << " floats (nothing lit below it)";
+      }
+      EXPECT_GT(islands, 0u) << files[k].filename() << " is dark";
+    }
+    std::swap(below, layer);
+  }
+}
+
 TEST_F(CliToolInfo, InsideOutHorseHasNegativeVolume) {
   const RunResult r = run({"info", sharedModel("horse_cyberware.stl").string()});
   ASSERT_EQ(r.code(), 0) << r.describe();
