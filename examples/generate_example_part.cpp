@@ -1,6 +1,7 @@
 // Writes the bundled example part (examples/example_part.stl): a square frame with a through hole, a
-// torus above it and a sphere beside it, generated from the analytic test shapes. Run by the build as
-// `generate_example_part OUT.stl`; a test checks the committed file equals a fresh one.
+// torus resting on it and a sphere standing beside it, generated from the analytic test shapes
+// (tests/fixtures/shapes.h, examplePart). Built as a test helper; regenerate the committed file with
+// `build/tests/generate_example_part examples/example_part.stl`. A test checks it equals a fresh one.
 #include <cstdio>
 #include <exception>
 

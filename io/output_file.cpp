@@ -8,6 +8,7 @@
 #include <cstring>
 #include <string>
 #include <system_error>
+#include <utility>
 
 #include <fcntl.h>
 #include <sys/statvfs.h>
@@ -355,6 +356,10 @@ OutputTransaction* OutputTransaction::current() {
 
 void OutputTransaction::stage(Staged staged) {
   staged_.push_back(std::move(staged));
+}
+
+std::vector<OutputTransaction::Staged> OutputTransaction::release() {
+  return std::exchange(staged_, {});
 }
 
 void OutputTransaction::commit(const std::atomic<bool>* cancel) {

@@ -162,6 +162,15 @@ class OutputTransaction {
   };
   void stage(Staged staged);
 
+  // The outputs staged so far, in staging order (toposlice-mpi sends them to rank 0, which commits the
+  // outputs of every rank in one transaction).
+  const std::vector<Staged>& staged() const { return staged_; }
+
+  // Hands every staged output over without removing it: the transaction forgets them, and the caller
+  // stages them in another transaction (or, after another process has committed them, releases their
+  // signal-table slots with unregisterPendingOutput).
+  std::vector<Staged> release();
+
  private:
   std::vector<Staged> staged_;
   std::vector<std::filesystem::path> committedPaths_;

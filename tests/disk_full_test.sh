@@ -72,7 +72,7 @@ done
 
 for contours in r.cli r.3mf r.svg; do
   svg=()
-  [ "$contours" = r.svg ] && svg=(--svg-layers 0-153)
+  [ "$contours" = r.svg ] && svg=(--svg-layers 0-last)
   "$bin" slice "$model" -H 0.05 -o "$full/$contours" "${svg[@]}" --masks "$normal/m.sl1" --printer sl1 \
     --report "$normal/r.csv" -q 2>"$work/err"
   expect_clean "slice with contours $contours on the full disk" $? "$work/err" "$full/$contours"

@@ -438,7 +438,7 @@ TEST_F(GooCli, LayersEqualThePngLayersOfTheSameJob) {
     for (const auto& e : fs::directory_iterator(path(tag + "_png")))
       pngs[e.path().filename().string()] = e.path();
     ASSERT_EQ(layers.size(), pngs.size()) << tag;
-    ASSERT_EQ(h.layers, 77u);  // ceil(7.7 / 0.1)
+    ASSERT_EQ(h.layers, 62u);  // ceil(6.2 / 0.1)
     EXPECT_EQ(h.antiAliasing, antialias ? 8u : 1u);
     std::size_t k = 0;
     bool grey = false;

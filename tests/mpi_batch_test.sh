@@ -5,6 +5,10 @@
 # loopback TCP only; the outputs must be byte-identical, the failure reported, the exit status 1 in both.
 # Then one output is deleted and the MPI job run again: only that variant is sliced, the result is
 # identical again. Also -np 1 against the single runner.
+# Then a plate job (the bundled plate example on a small plate, so that it spills over to 4 plates):
+# `toposlice-mpi plate` on 2 and 3 ranks writes the same bytes as `toposlice plate` (the report too, but
+# for its seconds); an output in the way and overlapping placements fail with one error and leave
+# nothing behind.
 #
 # Usage: tests/mpi_batch_test.sh [BUILD_DIR]   (default: build; builds nothing)
 # Skips (exit 0) when mpirun is not installed. Last line: "N passed, M failed".
@@ -83,10 +87,10 @@ for d in A B C; do write_job "$tmp/$d"; done
 
 # Loopback only: TCP between ranks (no shared-memory transport), the runtime's own traffic on lo too.
 export OMPI_MCA_btl_tcp_if_include=lo OMPI_MCA_oob_tcp_if_include=lo
-run_mpi() {  # run_mpi NP JOB OUTFILE
+run_mpi() {  # run_mpi NP JOB OUTFILE [COMMAND]: COMMAND is batch (default) or plate
   timeout 300 mpirun --allow-run-as-root --oversubscribe --bind-to none -np "$1" \
     --mca btl self,tcp --mca btl_tcp_if_include lo --mca oob_tcp_if_include lo \
-    "$mpi" batch "$2" >"$3" 2>&1
+    "$mpi" "${4:-batch}" "$2" >"$3" 2>&1
 }
 same_outputs() {  # same_outputs DIR1 DIR2: every femur output present in both and byte-identical
   local f
@@ -139,5 +143,80 @@ rc_c=$?
 check "1 rank exits 1, got $rc_c" test "$rc_c" -eq 1
 check "1 rank: outputs byte-identical to the single process" same_outputs "$tmp/A" "$tmp/C"
 check "1 rank: every variant on rank 0" test "$(awk '$2 == ":" && $3 == "ok" { print $7 }' "$tmp/C.log" | sort -u)" = 0
+
+# A plate job: the four arches of examples/plate on a 70 x 40 mm plate, one arch per plate. The same job
+# file for every run (an SL1 archive is dated by its job file), outputs in P/out, moved aside after each.
+plate_dir="$tmp/P"
+mkdir -p "$plate_dir/out"
+ex="$repo/examples/plate"
+cat >"$plate_dir/job.json" <<EOF
+{
+  "version": 1,
+  "description": "mpi_batch_test: the plate example on a small plate, spilling over to several plates",
+  "printer": "sl1",
+  "material": "default",
+  "settings": {"layer_height": 0.5, "pixel": 0.1, "resolution": [700, 400]},
+  "arrange": {"spacing": 2, "margin": 3, "rotation_step": 90},
+  "parts": [
+    {"name": "wide", "model": "$ex/arch_wide.stl", "template": "$ex/arch_template.topo", "placement": "auto"},
+    {"name": "wavy", "model": "$ex/arch_wavy.stl", "template": "$ex/arch_template.topo", "placement": "auto"},
+    {"name": "named", "model": "$ex/arch_named.stl", "template": "$ex/arch_template.topo",
+     "add": ["$ex/arch_named_label.stl"], "placement": "auto"},
+    {"name": "plain", "model": "$ex/arch_template.stl", "template": "$ex/arch_template.topo", "placement": "auto"}
+  ],
+  "outputs": {"masks": "out/p.sl1", "contours": ["out/p.cli", "out/p.svg"], "report": "out/report.json",
+              "picture": "out/p.png"}
+}
+EOF
+plate_files="p.cli p.svg p.sl1 p.png p-plate2.cli p-plate2.svg p-plate2.sl1 p-plate2.png
+  p-plate3.cli p-plate3.svg p-plate3.sl1 p-plate3.png p-plate4.cli p-plate4.svg p-plate4.sl1 p-plate4.png"
+same_plates() {  # same_plates DIR1 DIR2: all 16 plate outputs byte-identical, the reports but for their seconds
+  local f
+  for f in $plate_files; do
+    [ -s "$1/$f" ] && cmp -s "$1/$f" "$2/$f" || return 1
+  done
+  [ "$(ls "$1" | wc -l)" -eq 17 ] && [ "$(ls "$2" | wc -l)" -eq 17 ] || return 1
+  cmp -s <(sed '/"seconds": {/,/}/d' "$1/report.json") <(sed '/"seconds": {/,/}/d' "$2/report.json")
+}
+timeout 300 "$single" plate "$plate_dir/job.json" >"$tmp/P1.log" 2>&1
+rc_p1=$?
+mv "$plate_dir/out" "$plate_dir/single" && mkdir "$plate_dir/out"
+check "plate: single process exits 0, got $rc_p1" test "$rc_p1" -eq 0
+check "plate: the job spills over to 4 plates" grep -q "^4 plates, 4 parts" "$tmp/P1.log"
+for np in 2 3; do
+  run_mpi "$np" "$plate_dir/job.json" "$tmp/P$np.log" plate
+  rc_p=$?
+  echo "--- toposlice-mpi plate, $np ranks:"
+  sed 's/^/    /' "$tmp/P$np.log"
+  check "plate, $np ranks: exits 0, got $rc_p" test "$rc_p" -eq 0
+  check "plate, $np ranks: outputs byte-identical to the single process" \
+    same_plates "$plate_dir/single" "$plate_dir/out"
+  check "plate, $np ranks: plate 2 sliced on rank 1" grep -q "plate 2 on rank 1," "$tmp/P$np.log"
+  check "plate, $np ranks: the single process's summary" \
+    cmp -s <(grep -v '^read+topology\|^ranks:' "$tmp/P$np.log") <(grep -v '^read+topology' "$tmp/P1.log")
+  mv "$plate_dir/out" "$plate_dir/np$np" && mkdir "$plate_dir/out"
+done
+
+# Plate 2's contours are in the way (the job does not overwrite): plate 2 is rank 1's, rank 0 reports it
+# once, every rank exits 1, and no other output or temporary is left.
+echo "not a toposlice file" >"$plate_dir/out/p-plate2.svg"
+run_mpi 2 "$plate_dir/job.json" "$tmp/P_exists.log" plate
+rc_p=$?
+check "plate, an output in the way: 2 ranks exit 1, got $rc_p" test "$rc_p" -eq 1
+check "plate, an output in the way: one error naming it" \
+  test "$(grep -c '^toposlice-mpi: error: .*p-plate2.svg: already exists' "$tmp/P_exists.log")" -eq 1
+check "plate, an output in the way: nothing else written, no temporaries" \
+  test "$(ls "$plate_dir/out")" = p-plate2.svg
+rm -f "$plate_dir/out/p-plate2.svg"
+
+# Given placements that overlap: refused before slicing, reported once by 3 ranks, nothing written.
+sed 's/"placement": "auto"/"placement": {"x": 30, "y": 15}/' "$plate_dir/job.json" >"$plate_dir/overlap.json"
+run_mpi 3 "$plate_dir/overlap.json" "$tmp/P_overlap.log" plate
+rc_p=$?
+check "plate, overlapping placements: 3 ranks exit 1, got $rc_p" test "$rc_p" -eq 1
+check "plate, overlapping placements: reported once" \
+  test "$(grep -c '^toposlice-mpi: error: .*overlap.json: the plate cannot be printed as given' "$tmp/P_overlap.log")" -eq 1
+check "plate, overlapping placements: names the parts" grep -q "parts 'wide' and 'wavy' overlap" "$tmp/P_overlap.log"
+check "plate, overlapping placements: nothing written" test -z "$(ls "$plate_dir/out")"
 
 finish

@@ -131,7 +131,7 @@ TEST(SliceAnalytic, HorizontalFacetsInThePlane) {
 
 TEST(SliceAnalytic, CanonicalLoopsStartAtLowestFacet) {
   const FacetSoup soup = fixtures::examplePart();
-  const auto planes = uniformPlanes(0, 7.7, 0.1);
+  const auto planes = uniformPlanes(0, 6.2, 0.1);
   const auto layers = sliceAllMethods(soup, planes);
   for (const auto& layer : layers) {
     uint32_t previous = 0;
@@ -148,7 +148,7 @@ TEST(SliceAnalytic, CanonicalLoopsStartAtLowestFacet) {
 
 TEST(SliceAnalytic, BandSizesGiveIdenticalLayers) {
   const FacetSoup soup = fixtures::examplePart();
-  const auto planes = uniformPlanes(0, 7.7, 0.05);
+  const auto planes = uniformPlanes(0, 6.2, 0.05);
   const auto reference = fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse, 1000);
   for (const uint32_t band : {1u, 3u, 7u, 64u})
     EXPECT_TRUE(fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse, band) == reference) << band;
@@ -159,7 +159,7 @@ TEST(SliceAnalytic, EmbreeCandidatesGiveIdenticalLayers) {
   soup.corners.push_back({1, 1, 1});  // plus a degenerate facet, which both searches must skip
   soup.corners.push_back({1, 1, 1});
   soup.corners.push_back({2, 1, 3});
-  const auto planes = uniformPlanes(0, 7.7, 0.05);
+  const auto planes = uniformPlanes(0, 6.2, 0.05);
   for (const SliceMethod method : {SliceMethod::SelfReuse, SliceMethod::ClosestPoint}) {
     SliceSettings sweep;
     sweep.method = method;

@@ -1,7 +1,9 @@
-// toposlice-mpi: a batch job (docs/FORMATS.md, "Batch jobs") spread over the ranks of an MPI job, on
-// one machine or many (README, "Many machines (MPI)").
+// toposlice-mpi: a batch job (docs/FORMATS.md, "Batch jobs") or a plate job ("Plate jobs") spread over
+// the ranks of an MPI job, on one machine or many (README, "Many machines (MPI)").
 // Usage: mpirun -np N toposlice-mpi batch JOB.json [--threads T] [--quiet] [--dispatch-only]
+//        mpirun -np N toposlice-mpi plate JOB.json [--threads T] [--quiet]
 //
+// Batch jobs:
 // Every rank reads the job and loads the template table once (rank 0 first builds and saves it when
 // the table file does not exist yet, then tells the others to go on), and slices whole variants with
 // its local cores through TBB. Outputs go to the paths in the job, written by runSliceJob through
@@ -28,6 +30,16 @@
 // `toposlice batch` with a rank column and broadcasts the exit status (1 when any variant failed), so
 // every rank exits with it. A rank that dies (a lost node) makes mpirun end the job; its variant never
 // appears under its output names, and running the job again slices only what is missing.
+//
+// Plate jobs: every rank reads the whole job and arranges it (PreparedPlateJob: serial and
+// integer-based, so every rank gets the same plates; rank 0 compares every rank's placements with its
+// own), then slices plate p (0-based) when p mod N is its rank, into temporaries. Rank 0 collects every
+// rank's per-plate numbers and temporaries, stages them all in one OutputTransaction in plate order,
+// adds the report and commits, so the outputs appear together or not at all and are the same bytes as
+// `toposlice plate` writes; a worker removes its temporaries unless rank 0 says it committed them. A
+// problem found while preparing (a bad job, overlapping or outside placements) is reported by rank 0
+// only; of failures while slicing, rank 0 reports the one of the lowest plate (where `toposlice plate`
+// would have stopped). Every rank exits with rank 0's status.
 #include <mpi.h>
 
 #include <CLI/CLI.hpp>
@@ -39,10 +51,12 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <filesystem>
 #include <mutex>
 #include <optional>
 #include <string>
 #include <thread>
+#include <type_traits>
 #include <vector>
 
 #include "io/errors.h"
@@ -50,12 +64,14 @@
 #include "io/output_file.h"
 #include "parallel/parallel.h"
 #include "tools/batch_plan.h"
+#include "tools/plate_job.h"
 
 namespace toposlice {
 namespace {
 
 constexpr int kTagRequest = 1;  // worker -> rank 0: a WireMessage
 constexpr int kTagWork = 2;     // rank 0 -> worker: one int64, a variant index or kStop
+constexpr int kTagPlate = 3;    // worker -> rank 0: a plate job's messages (ByteWriter)
 constexpr int64_t kStop = -1;
 constexpr std::size_t kMaxDetail = 16 * 1024;  // longer messages are cut
 
@@ -115,11 +131,33 @@ int broadcastInt(int value) {
   return value;
 }
 
-void sendRequest(Kind kind, int64_t index, const BatchOutcome& o) {
-  std::vector<char> bytes = encode(kind, index, o);
+void sendToRoot(const std::vector<char>& bytes, int tag) {
   MPI_Request request;
-  MPI_Isend(bytes.data(), static_cast<int>(bytes.size()), MPI_BYTE, 0, kTagRequest, MPI_COMM_WORLD, &request);
+  MPI_Isend(bytes.data(), static_cast<int>(bytes.size()), MPI_BYTE, 0, tag, MPI_COMM_WORLD, &request);
   waitQuietly(request);
+}
+
+void sendRequest(Kind kind, int64_t index, const BatchOutcome& o) {
+  sendToRoot(encode(kind, index, o), kTagRequest);
+}
+
+// Rank 0: the next message with `tag` from `source`, whatever its size.
+std::vector<char> receiveFrom(int source, int tag) {
+  auto interval = std::chrono::microseconds(20);
+  MPI_Status status;
+  for (;;) {
+    int flag = 0;
+    MPI_Iprobe(source, tag, MPI_COMM_WORLD, &flag, &status);
+    if (flag) break;
+    pause(interval);
+  }
+  int count = 0;
+  MPI_Get_count(&status, MPI_BYTE, &count);
+  std::vector<char> bytes(static_cast<std::size_t>(std::max(count, 0)));
+  MPI_Request request;
+  MPI_Irecv(bytes.data(), count, MPI_BYTE, source, tag, MPI_COMM_WORLD, &request);
+  waitQuietly(request);
+  return bytes;
 }
 
 int64_t receiveWork() {
@@ -350,6 +388,299 @@ int runDispatcher(const Options& options, int size, int provided) {
   return broadcastInt(totals.failed > 0 ? 1 : 0);
 }
 
+// ---------------------------------------------------------------------------------------------------
+// Plate jobs: plate p (0-based) is sliced by rank p mod N; rank 0 commits every rank's outputs.
+
+// A plate message as bytes: plain values and length-prefixed strings, read back in the order written.
+// All ranks run the same build (as for WireHeader).
+class ByteWriter {
+ public:
+  template <class T>
+  void put(const T& value) {
+    static_assert(std::is_trivially_copyable_v<T>);
+    const char* p = reinterpret_cast<const char*>(&value);
+    bytes_.insert(bytes_.end(), p, p + sizeof value);
+  }
+  void putString(const std::string& text) {
+    put<uint64_t>(text.size());
+    bytes_.insert(bytes_.end(), text.begin(), text.end());
+  }
+  const std::vector<char>& bytes() const { return bytes_; }
+
+ private:
+  std::vector<char> bytes_;
+};
+
+class ByteReader {
+ public:
+  explicit ByteReader(const std::vector<char>& bytes) : bytes_(bytes) {}
+  template <class T>
+  T get() {
+    static_assert(std::is_trivially_copyable_v<T>);
+    T value{};
+    if (sizeof value > bytes_.size() - at_) throw std::runtime_error("a plate message is truncated");
+    std::memcpy(&value, bytes_.data() + at_, sizeof value);
+    at_ += sizeof value;
+    return value;
+  }
+  std::string getString() {
+    const uint64_t n = get<uint64_t>();
+    if (n > bytes_.size() - at_) throw std::runtime_error("a plate message is truncated");
+    std::string text(bytes_.data() + at_, n);
+    at_ += n;
+    return text;
+  }
+
+ private:
+  const std::vector<char>& bytes_;
+  std::size_t at_ = 0;
+};
+
+int plateRank(uint32_t plate, int size) {
+  return static_cast<int>(plate % static_cast<uint32_t>(size));
+}
+
+// What a rank's arrangement decided, as bytes: rank 0 compares every rank's with its own, bit for bit.
+std::string placementBytes(const PlateResult& r) {
+  ByteWriter w;
+  w.put(r.plates);
+  for (const PlatePartResult& p : r.parts)
+    for (const double v :
+         {static_cast<double>(p.plate), p.placement.x, p.placement.y, p.placement.rotation, p.tx, p.ty})
+      w.put(v);
+  return {w.bytes().begin(), w.bytes().end()};
+}
+
+// A plate a rank has sliced, and the temporaries it staged.
+struct PlateDone {
+  uint32_t plate = 0;
+  std::vector<OutputTransaction::Staged> staged;
+};
+
+// What a worker sends when it has sliced its plates (or failed at `failedPlate`).
+void putPlatesDone(ByteWriter& w, const PlateResult& r, const std::vector<PlateDone>& done,
+                   int64_t failedPlate, const std::string& error) {
+  w.put<int64_t>(failedPlate);
+  w.putString(error);
+  w.put<uint64_t>(done.size());
+  for (const PlateDone& d : done) {
+    w.put(d.plate);
+    w.put(r.layers[d.plate]);
+    w.put(r.volumeMl[d.plate]);
+    for (const PlatePartResult& p : r.parts)
+      if (p.plate == d.plate) {
+        w.put(p.volumeMl);
+        w.put(p.firstLayer);
+        w.put(p.lastLayer);
+      }
+    w.put<uint64_t>(d.staged.size());
+    for (const OutputTransaction::Staged& s : d.staged) {
+      // The temporary as an absolute path (rank 0 may run in another folder); the final path as in the
+      // job, which names the same file on every rank.
+      w.putString(std::filesystem::absolute(s.temp).string());
+      w.putString(s.final.string());
+      w.put<int32_t>(s.overwrite ? 1 : 0);
+      w.put<int32_t>(s.kind == OutputKind::LayerFolder ? 1 : 0);
+      w.putString(s.layerExt);
+    }
+  }
+}
+
+// The final paths plate `plate` may write (report excluded: rank 0 writes it).
+std::vector<std::filesystem::path> plateOutputs(const PlateJob& job, uint32_t plate) {
+  std::vector<std::filesystem::path> paths;
+  for (const auto* o : {&job.masks, &job.picture})
+    if (!o->empty()) paths.push_back(plateOutputPath(*o, plate));
+  for (const auto& c : job.contours) paths.push_back(plateOutputPath(c, plate));
+  return paths;
+}
+
+// Rank 0 reads what worker `source` sent into `result` and `byPlate`; returns the failed plate (-1: none)
+// and its error.
+int64_t getPlatesDone(ByteReader& in, int source, int size, const PlateJob& job, PlateResult& result,
+                      std::vector<std::vector<OutputTransaction::Staged>>& byPlate, std::string& error) {
+  const int64_t failedPlate = in.get<int64_t>();
+  error = in.getString();
+  const uint64_t plates = in.get<uint64_t>();
+  for (uint64_t i = 0; i < plates; ++i) {
+    const uint32_t plate = in.get<uint32_t>();
+    if (plate >= result.plates || plateRank(plate, size) != source)
+      throw std::runtime_error("rank " + std::to_string(source) + " sent plate " + std::to_string(plate + 1) +
+                               ", which is not its own");
+    result.layers[plate] = in.get<uint32_t>();
+    result.volumeMl[plate] = in.get<double>();
+    for (PlatePartResult& p : result.parts)
+      if (p.plate == plate) {
+        p.volumeMl = in.get<double>();
+        p.firstLayer = in.get<int64_t>();
+        p.lastLayer = in.get<int64_t>();
+      }
+    const std::vector<std::filesystem::path> allowed = plateOutputs(job, plate);
+    const uint64_t staged = in.get<uint64_t>();
+    for (uint64_t k = 0; k < staged; ++k) {
+      OutputTransaction::Staged s;
+      s.temp = in.getString();
+      s.final = in.getString();
+      s.overwrite = in.get<int32_t>() != 0;
+      s.kind = in.get<int32_t>() != 0 ? OutputKind::LayerFolder : OutputKind::File;
+      s.layerExt = in.getString();
+      if (std::find(allowed.begin(), allowed.end(), s.final) == allowed.end())
+        throw std::runtime_error("rank " + std::to_string(source) + " wrote " + s.final.string() +
+                                 ", which is no output of plate " + std::to_string(plate + 1));
+      byPlate[plate].push_back(std::move(s));
+    }
+  }
+  return failedPlate;
+}
+
+// Every rank: reads and arranges the whole job (the same placements everywhere, which rank 0 checks),
+// slices its own plates into temporaries and sends rank 0 their numbers and temporaries. Rank 0 then
+// stages every rank's temporaries in one transaction, plate by plate as `toposlice plate` does, adds the
+// report and commits; the workers keep their temporaries until rank 0 says whether it committed them,
+// and remove them if not. Every rank returns rank 0's status.
+int runPlateRank(const Options& options, int rank, int size) {
+  std::optional<PreparedPlateJob> prepared;
+  std::optional<ThreadLimit> jobThreads;
+  std::string error;
+  try {
+    PlateJob job = readPlateJob(options.job);
+    jobThreads.emplace(job.threads);
+    prepared.emplace(std::move(job));
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+  // 1. Everyone has prepared: rank 0 names the first problem and says whether to go on.
+  int go = 0;
+  if (rank != 0) {
+    ByteWriter w;
+    w.putString(error);
+    w.putString(prepared ? placementBytes(prepared->result()) : std::string{});
+    sendToRoot(w.bytes(), kTagPlate);
+    go = broadcastInt(0);
+  } else {
+    if (!error.empty()) std::fprintf(stderr, "toposlice-mpi: error: %s\n", error.c_str());
+    const std::string mine = prepared ? placementBytes(prepared->result()) : std::string{};
+    bool ok = error.empty();
+    for (int source = 1; source < size; ++source) {
+      const std::vector<char> bytes = receiveFrom(source, kTagPlate);
+      ByteReader in(bytes);
+      std::string theirs, placements;
+      try {
+        theirs = in.getString();
+        placements = in.getString();
+      } catch (const std::exception& e) {
+        theirs = e.what();
+      }
+      if (!theirs.empty()) {
+        if (ok) std::fprintf(stderr, "toposlice-mpi: error: rank %d: %s\n", source, theirs.c_str());
+        ok = false;
+      } else if (ok && placements != mine) {
+        std::fprintf(stderr,
+                     "toposlice-mpi: error: rank %d arranged the parts differently from rank 0 (every rank "
+                     "needs the same build and the same job files)\n",
+                     source);
+        ok = false;
+      }
+    }
+    go = broadcastInt(ok ? 1 : 0);
+  }
+  if (!go) return broadcastInt(1);
+  const auto sliceStart = std::chrono::steady_clock::now();
+
+  // 2. Each rank slices its plates into temporaries of its own transaction.
+  PlateResult& result = prepared->result();
+  const PlateJob& job = prepared->job();
+  OutputTransaction mine;
+  std::vector<PlateDone> done;
+  int64_t failedPlate = -1;
+  for (uint32_t plate = static_cast<uint32_t>(rank); plate < result.plates;
+       plate += static_cast<uint32_t>(size)) {
+    const std::size_t before = mine.staged().size();
+    try {
+      prepared->slicePlate(plate, nullptr);
+    } catch (const std::exception& e) {
+      failedPlate = plate;
+      error = e.what();
+      break;
+    }
+    PlateDone d;
+    d.plate = plate;
+    d.staged.assign(mine.staged().begin() + static_cast<std::ptrdiff_t>(before), mine.staged().end());
+    done.push_back(std::move(d));
+  }
+  if (rank != 0) {
+    ByteWriter w;
+    putPlatesDone(w, result, done, failedPlate, error);
+    sendToRoot(w.bytes(), kTagPlate);
+    const int status = broadcastInt(0);
+    // Committed: rank 0 has renamed the temporaries, so they are no longer this rank's to remove.
+    if (status == 0)
+      for (const OutputTransaction::Staged& s : mine.release()) unregisterPendingOutput(s.registrySlot);
+    return status;
+  }
+
+  // 3. Rank 0: every rank's plates, the first failure in plate order (the one `toposlice plate` would
+  // have stopped at), or one transaction for all outputs.
+  std::vector<std::vector<OutputTransaction::Staged>> byPlate(result.plates);
+  int64_t firstFailed = failedPlate;
+  std::string firstError = error;
+  for (int source = 1; source < size; ++source) {
+    const std::vector<char> bytes = receiveFrom(source, kTagPlate);
+    std::string theirError;
+    int64_t theirFailed = -1;
+    try {
+      ByteReader in(bytes);
+      theirFailed = getPlatesDone(in, source, size, job, result, byPlate, theirError);
+    } catch (const std::exception& e) {
+      theirFailed = static_cast<int64_t>(result.plates);
+      theirError = e.what();
+    }
+    if (theirFailed >= 0 && (firstFailed < 0 || theirFailed < firstFailed)) {
+      firstFailed = theirFailed;
+      firstError = theirError;
+    }
+  }
+  int status = 0;
+  if (firstFailed >= 0) {
+    std::fprintf(stderr, "toposlice-mpi: error: %s\n", firstError.c_str());
+    status = 1;
+  } else {
+    try {
+      OutputTransaction all;
+      std::vector<OutputTransaction::Staged> own = mine.release();
+      std::size_t next = 0;
+      for (uint32_t plate = 0; plate < result.plates; ++plate) {
+        if (plateRank(plate, size) == 0) {
+          const std::size_t count = done[plate / static_cast<uint32_t>(size)].staged.size();
+          for (std::size_t k = 0; k < count; ++k) all.stage(std::move(own[next++]));
+          continue;
+        }
+        for (OutputTransaction::Staged& s : byPlate[plate]) {
+          if (s.kind == OutputKind::File) s.registrySlot = registerPendingOutput(s.temp.string());
+          all.stage(std::move(s));
+        }
+      }
+      result.sliceSeconds =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - sliceStart).count();
+      prepared->writeReport();
+      all.commit();
+      result.written = all.committed();
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "toposlice-mpi: error: %s\n", e.what());
+      status = 1;
+    }
+  }
+  if (status == 0 && !options.quiet) {
+    printPlateSummary(stdout, result);
+    std::printf("ranks: %d x %u threads;", size, ThreadLimit::available());
+    for (uint32_t plate = 0; plate < result.plates; ++plate)
+      std::printf(" plate %u on rank %d%s", plate + 1, plateRank(plate, size),
+                  plate + 1 < result.plates ? "," : "\n");
+    std::fflush(stdout);
+  }
+  return broadcastInt(status);
+}
+
 int run(int argc, char** argv) {
   int provided = MPI_THREAD_SINGLE;
   MPI_Init_thread(&argc, &argv, MPI_THREAD_FUNNELED, &provided);
@@ -357,7 +688,7 @@ int run(int argc, char** argv) {
   MPI_Comm_rank(MPI_COMM_WORLD, &rank);
   MPI_Comm_size(MPI_COMM_WORLD, &size);
 
-  CLI::App app{"toposlice-mpi: a toposlice batch job spread over the ranks of an MPI job"};
+  CLI::App app{"toposlice-mpi: a toposlice batch or plate job spread over the ranks of an MPI job"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "toposlice-mpi 0.1.0");
   Options options;
@@ -368,6 +699,11 @@ int run(int argc, char** argv) {
   batch->add_flag("-q,--quiet", options.quiet, "No progress lines or summary, errors only");
   batch->add_flag("--dispatch-only", options.dispatchOnly,
                   "Rank 0 hands out variants but slices none (with -np > 1)");
+  CLI::App* plate = app.add_subcommand(
+      "plate", "Slice the plates of a plate job on the ranks: plate n on rank (n - 1) mod N");
+  plate->add_option("job", jobPath, "Plate job (JSON, see docs/FORMATS.md)")->required();
+  plate->add_option("--threads", options.threads, "Worker threads per rank (default: all cores)");
+  plate->add_flag("-q,--quiet", options.quiet, "No summary, errors only");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -393,7 +729,9 @@ int run(int argc, char** argv) {
   int status = 1;
   {
     ThreadLimit limit(options.threads);
-    if (rank == 0) {
+    if (*plate) {
+      status = runPlateRank(options, rank, size);
+    } else if (rank == 0) {
       status = runDispatcher(options, size, provided);
     } else {
       if (broadcastInt(0) == 0) {

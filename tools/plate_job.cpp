@@ -362,9 +362,21 @@ void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
 
 }  // namespace
 
-PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
-  const PlateGeometry geometry = plateGeometry(job);
+struct PreparedPlateJob::Impl {
+  PlateJob job;
+  PlateGeometry geometry;
+  std::map<std::filesystem::path, TemplateTable> tables;  // by file; the parts' adjacency spans point here
+  std::vector<LoadedPart> loaded;                         // in the plate orientation
   PlateResult result;
+  std::vector<std::filesystem::path> outputs;  // plate 1's: masks, report, picture, contours (empty: none)
+};
+
+PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {
+  impl_->job = std::move(given);
+  const PlateJob& job = impl_->job;
+  impl_->geometry = plateGeometry(job);
+  const PlateGeometry& geometry = impl_->geometry;
+  PlateResult& result = impl_->result;
   const std::size_t count = job.parts.size();
   std::vector<std::filesystem::path> inputs{job.sourceFile};
   for (const PlatePart& p : job.parts) {
@@ -373,14 +385,15 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
     inputs.insert(inputs.end(), p.add.begin(), p.add.end());
     inputs.insert(inputs.end(), p.remove.begin(), p.remove.end());
   }
-  std::vector<std::filesystem::path> outputs{job.masks, job.report, job.picture};
+  std::vector<std::filesystem::path>& outputs = impl_->outputs;
+  outputs = {job.masks, job.report, job.picture};
   outputs.insert(outputs.end(), job.contours.begin(), job.contours.end());
   for (const auto& o : outputs)
     if (!o.empty()) checkNotAnInput(o, inputs);
 
   // Read every part (and each distinct template table once), in parallel across parts.
   auto start = std::chrono::steady_clock::now();
-  std::map<std::filesystem::path, TemplateTable> tables;
+  std::map<std::filesystem::path, TemplateTable>& tables = impl_->tables;
   for (const PlatePart& p : job.parts)
     if (!p.templateFile.empty() && !tables.count(p.templateFile))
       tables[p.templateFile] = readTemplateFile(p.templateFile);
@@ -388,7 +401,8 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
   read.unitMm = job.unitMm;
   read.scale = job.scale;
   read.runner = parallelChunkRunner();
-  std::vector<LoadedPart> loaded(count);
+  std::vector<LoadedPart>& loaded = impl_->loaded;
+  loaded.resize(count);
   std::vector<std::string> errors(count);
   result.parts.resize(count);
   const double cell = job.cell;
@@ -476,6 +490,8 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
   result.arrangeSeconds = secondsSince(start);
   result.plates = arranged.plates;
   for (uint32_t p = 0; p < arranged.plates; ++p) result.density.push_back(arranged.density(p));
+  result.layers.assign(result.plates, 0);
+  result.volumeMl.assign(result.plates, 0.0);
 
   // Orientation: meshes turned in place (after the template check, which does not depend on it).
   for (std::size_t p = 0; p < count; ++p) {
@@ -496,20 +512,34 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
     r.footprintMm2 = loaded[p].footprint.area();
   }
   checkPlacements(job, loaded, result.parts, geometry);
+}
 
-  // Slicing, plate by plate; every output of every plate joins one transaction.
-  start = std::chrono::steady_clock::now();
-  OutputTransaction transaction;
-  for (uint32_t plate = 0; plate < result.plates; ++plate) {
-    std::vector<std::size_t> members;
-    for (std::size_t p = 0; p < count; ++p)
-      if (result.parts[p].plate == plate) members.push_back(p);
-    const PlateSlice s = slicePlate(job, plate, members, loaded, result.parts, geometry, progress);
-    result.layers.push_back(s.layers);
-    result.volumeMl.push_back(s.volumeMl);
-  }
-  result.sliceSeconds = secondsSince(start);
+PreparedPlateJob::~PreparedPlateJob() = default;
 
+const PlateJob& PreparedPlateJob::job() const {
+  return impl_->job;
+}
+
+PlateResult& PreparedPlateJob::result() {
+  return impl_->result;
+}
+
+void PreparedPlateJob::slicePlate(uint32_t plate, const ProgressContext* progress) {
+  PlateResult& result = impl_->result;
+  std::vector<std::size_t> members;
+  for (std::size_t p = 0; p < result.parts.size(); ++p)
+    if (result.parts[p].plate == plate) members.push_back(p);
+  const PlateSlice s = toposlice::slicePlate(impl_->job, plate, members, impl_->loaded, result.parts,
+                                             impl_->geometry, progress);
+  result.layers[plate] = s.layers;
+  result.volumeMl[plate] = s.volumeMl;
+}
+
+void PreparedPlateJob::writeReport() const {
+  const PlateJob& job = impl_->job;
+  const PlateGeometry& geometry = impl_->geometry;
+  const PlateResult& result = impl_->result;
+  const std::vector<std::filesystem::path>& outputs = impl_->outputs;
   if (!job.report.empty()) {
     nlohmann::ordered_json j;
     j["toposlice"] = TOPOSLICE_VERSION_TEXT;
@@ -559,9 +589,20 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
     file.write(text.data(), text.size());
     file.commit();
   }
+}
+
+PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
+  PreparedPlateJob prepared(job);
+  PlateResult& result = prepared.result();
+  // Slicing, plate by plate; every output of every plate and the report join one transaction.
+  const auto start = std::chrono::steady_clock::now();
+  OutputTransaction transaction;
+  for (uint32_t plate = 0; plate < result.plates; ++plate) prepared.slicePlate(plate, progress);
+  result.sliceSeconds = secondsSince(start);
+  prepared.writeReport();
   transaction.commit(&interruptRequested());
   result.written = transaction.committed();
-  return result;
+  return std::move(result);
 }
 
 int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
@@ -574,22 +615,25 @@ int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
   }
   ThreadLimit threads(job.threads);
   const PlateResult r = runPlateJob(job, nullptr);
-  if (quiet) return 0;
-  std::printf("%u plate%s, %zu parts (%u checked against a template, %u built)\n", r.plates,
-              r.plates == 1 ? "" : "s", r.parts.size(), r.templateChecked, r.built);
-  for (uint32_t p = 0; p < r.plates; ++p)
-    std::printf("plate %u: %u layers, packing density %.1f %%, %.3f ml\n", p + 1, r.layers[p],
-                100 * r.density[p], r.volumeMl[p]);
-  std::printf("%-20s %5s %9s %9s %7s %9s %7s %7s %10s\n", "part", "plate", "x mm", "y mm", "rot", "volume ml",
-              "first", "last", "footprint");
-  for (const PlatePartResult& p : r.parts)
-    std::printf("%-20s %5u %9.3f %9.3f %7.2f %9.4f %7lld %7lld %7.1f mm2\n", p.name.c_str(), p.plate + 1,
-                p.placement.x, p.placement.y, p.placement.rotation, p.volumeMl,
-                static_cast<long long>(p.firstLayer), static_cast<long long>(p.lastLayer), p.footprintMm2);
-  for (const auto& w : r.written) std::printf("wrote %s\n", w.c_str());
-  std::printf("read+topology %.2f s, arrange %.3f s, slice+write %.2f s\n", r.readSeconds, r.arrangeSeconds,
-              r.sliceSeconds);
+  if (!quiet) printPlateSummary(stdout, r);
   return 0;
+}
+
+void printPlateSummary(std::FILE* out, const PlateResult& r) {
+  std::fprintf(out, "%u plate%s, %zu parts (%u checked against a template, %u built)\n", r.plates,
+               r.plates == 1 ? "" : "s", r.parts.size(), r.templateChecked, r.built);
+  for (uint32_t p = 0; p < r.plates; ++p)
+    std::fprintf(out, "plate %u: %u layers, packing density %.1f %%, %.3f ml\n", p + 1, r.layers[p],
+                 100 * r.density[p], r.volumeMl[p]);
+  std::fprintf(out, "%-20s %5s %9s %9s %7s %9s %7s %7s %10s\n", "part", "plate", "x mm", "y mm", "rot",
+               "volume ml", "first", "last", "footprint");
+  for (const PlatePartResult& p : r.parts)
+    std::fprintf(out, "%-20s %5u %9.3f %9.3f %7.2f %9.4f %7lld %7lld %7.1f mm2\n", p.name.c_str(),
+                 p.plate + 1, p.placement.x, p.placement.y, p.placement.rotation, p.volumeMl,
+                 static_cast<long long>(p.firstLayer), static_cast<long long>(p.lastLayer), p.footprintMm2);
+  for (const auto& w : r.written) std::fprintf(out, "wrote %s\n", w.c_str());
+  std::fprintf(out, "read+topology %.2f s, arrange %.3f s, slice+write %.2f s\n", r.readSeconds,
+               r.arrangeSeconds, r.sliceSeconds);
 }
 
 }  // namespace toposlice

@@ -4,7 +4,9 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <filesystem>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -45,6 +47,42 @@ struct PlateResult {
 // template (unless settings.allow_rebuild), a part too large for an empty plate. All outputs of all
 // plates form one OutputTransaction. Throws InputError or OutputError.
 PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress);
+
+// A plate job read, checked and arranged, ready to be sliced plate by plate: runPlateJob slices every
+// plate in one process, toposlice-mpi (tools/mpi_batch.cpp) hands the plates to its ranks, each of
+// which prepares the same job. Preparing reads every part and template table, obtains each part's
+// topology, arranges, and refuses what runPlateJob refuses before slicing; it writes nothing. The
+// arrangement is serial and integer-based: every process that prepares the job gets the same plates
+// and placements, bit for bit.
+class PreparedPlateJob {
+ public:
+  explicit PreparedPlateJob(PlateJob job);  // throws InputError
+  ~PreparedPlateJob();
+  PreparedPlateJob(const PreparedPlateJob&) = delete;
+  PreparedPlateJob& operator=(const PreparedPlateJob&) = delete;
+
+  const PlateJob& job() const;
+  // The parts as placed, template reuse and the preparation's seconds; per plate `density`. `layers`
+  // and `volumeMl` (per plate) and each part's volumeMl, firstLayer and lastLayer are filled by
+  // slicePlate, or by the caller for plates sliced in another process; sliceSeconds by the caller.
+  PlateResult& result();
+
+  // Slices plate `plate` (0-based) and writes its outputs (`-plate<n>` names after the first) into the
+  // calling thread's current OutputTransaction, in a fixed order: contours, masks, picture. Throws
+  // InputError (a part no layer cuts, every mask dark, interrupted) or OutputError.
+  void slicePlate(uint32_t plate, const ProgressContext* progress);
+
+  // Writes the report (outputs.report), when the job names one, from result() after every plate's
+  // numbers are in; joins the current OutputTransaction.
+  void writeReport() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// The summary `toposlice plate` prints: plates, one line per part, the outputs written, the seconds.
+void printPlateSummary(std::FILE* out, const PlateResult& result);
 
 // The command: reads the job, runs it with job.threads, prints the per-part table; returns 0. A
 // non-empty `outputDir` puts every output there under its file name (instead of where the job says).
