@@ -1,4 +1,4 @@
-// toposlice: the command-line program. Subcommands: info, slice, template, batch, preview.
+// toposlice: the command-line program. Subcommands: info, slice, template, batch, preview, plate.
 // Every failure prints one line "toposlice: error: <reason>" to stderr and exits non-zero.
 #include <CLI/CLI.hpp>
 
