@@ -44,47 +44,63 @@ bool allFinite(std::span<const Point2d> loop) {
   return true;
 }
 
-// Collects the edges of all closed, finite loops that cross at least one of `count` sample lines
-// origin + (k + 1/2) pitch, then groups them by first line into scratch.bucketed / bucketStart.
-void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitch, uint32_t count,
-                    RasterScratch& scratch) {
-  std::vector<RasterEdge>& edges = scratch.edges;
-  edges.clear();
+// Calls f(loop, sign) for every closed loop with finite points of every set (open polylines and loops
+// with a NaN or infinity enclose nothing).
+template <class F>
+void forEachClosedFiniteLoop(std::span<const ContourSet> sets, F&& f) {
   for (const ContourSet& set : sets) {
     assert(set.layer != nullptr && (set.sign == 1 || set.sign == -1));
     const LayerContours& layer = *set.layer;
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       if (layer.loopClosed[l] == 0) continue;
       const std::span<const Point2d> loop = layer.loopPoints(l);
-      if (!allFinite(loop)) continue;
-      const std::size_t n = loop.size();
-      for (std::size_t i = 0; i < n; ++i) {
-        const Point2d a = loop[i];
-        const Point2d b = loop[i + 1 == n ? 0 : i + 1];
-        if (a.y == b.y) continue;  // horizontal: crosses no sample line under the half-open rule
-        const bool upward = a.y < b.y;
-        const Point2d lo = upward ? a : b;
-        const Point2d hi = upward ? b : a;
-        const uint32_t first = firstSampleAtOrAbove(lo.y, origin, pitch, count);
-        const uint32_t end = firstSampleAtOrAbove(hi.y, origin, pitch, count);
-        if (first >= end) continue;
-        double slope = (hi.x - lo.x) / (hi.y - lo.y);
-        if (!std::isfinite(slope)) slope = 0.0;  // dy is so small that any x of the edge is as good
-        // A CCW outer loop runs downwards on its left side: crossing it left to right enters the solid.
-        const int32_t winding = upward ? -set.sign : set.sign;
-        edges.push_back(RasterEdge{0.0, lo.x, lo.y, slope, first, end, winding});
-      }
+      if (allFinite(loop)) f(loop, set.sign);
     }
   }
+}
 
-  std::vector<uint32_t>& start = scratch.bucketStart;
+// Groups `edges` by first(edge) < count, keeping their order inside a group (a counting sort):
+// bucketed[start[k], start[k + 1]) are the edges whose first is k.
+template <class Edge, class First>
+void bucketByFirst(const std::vector<Edge>& edges, uint32_t count, First first, std::vector<Edge>& bucketed,
+                   std::vector<uint32_t>& start) {
   start.assign(static_cast<std::size_t>(count) + 1, 0);
-  for (const RasterEdge& e : edges) ++start[e.first + 1];
+  for (const Edge& e : edges) ++start[first(e) + 1];
   for (uint32_t k = 0; k < count; ++k) start[k + 1] += start[k];
-  scratch.bucketed.resize(edges.size());
-  for (const RasterEdge& e : edges) scratch.bucketed[start[e.first]++] = e;  // start[k] becomes start[k+1]
+  bucketed.resize(edges.size());
+  for (const Edge& e : edges) bucketed[start[first(e)]++] = e;  // start[k] becomes start[k+1]
   for (uint32_t k = count; k > 0; --k) start[k] = start[k - 1];
   start[0] = 0;
+}
+
+// Collects the edges of all closed, finite loops that cross at least one of `count` sample lines
+// origin + (k + 1/2) pitch, then groups them by first line into scratch.bucketed / bucketStart.
+void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitch, uint32_t count,
+                    RasterScratch& scratch) {
+  std::vector<RasterEdge>& edges = scratch.edges;
+  edges.clear();
+  forEachClosedFiniteLoop(sets, [&](std::span<const Point2d> loop, int32_t sign) {
+    const std::size_t n = loop.size();
+    for (std::size_t i = 0; i < n; ++i) {
+      const Point2d a = loop[i];
+      const Point2d b = loop[i + 1 == n ? 0 : i + 1];
+      if (a.y == b.y) continue;  // horizontal: crosses no sample line under the half-open rule
+      const bool upward = a.y < b.y;
+      const Point2d lo = upward ? a : b;
+      const Point2d hi = upward ? b : a;
+      const uint32_t first = firstSampleAtOrAbove(lo.y, origin, pitch, count);
+      const uint32_t end = firstSampleAtOrAbove(hi.y, origin, pitch, count);
+      if (first >= end) continue;
+      double slope = (hi.x - lo.x) / (hi.y - lo.y);
+      if (!std::isfinite(slope)) slope = 0.0;  // dy is so small that any x of the edge is as good
+      // A CCW outer loop runs downwards on its left side: crossing it left to right enters the solid.
+      const int32_t winding = upward ? -sign : sign;
+      edges.push_back(RasterEdge{0.0, lo.x, lo.y, slope, first, end, winding});
+    }
+  });
+
+  bucketByFirst(
+      edges, count, [](const RasterEdge& e) { return e.first; }, scratch.bucketed, scratch.bucketStart);
 
   scratch.active.clear();
   scratch.active.reserve(edges.size());
@@ -182,55 +198,43 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
   const uint32_t height = grid.height;
   const double inv = 1.0 / grid.pixel;
   const double top = static_cast<double>(height);
-  for (const ContourSet& set : sets) {
-    assert(set.layer != nullptr && (set.sign == 1 || set.sign == -1));
-    const LayerContours& layer = *set.layer;
-    for (std::size_t l = 0; l < layer.loopCount(); ++l) {
-      if (layer.loopClosed[l] == 0) continue;
-      const std::span<const Point2d> loop = layer.loopPoints(l);
-      if (!allFinite(loop)) continue;
-      const std::size_t n = loop.size();
-      std::vector<int32_t>& ids = scratch.loopIds;
-      ids.assign(n, -1);
-      for (std::size_t i = 0; i < n; ++i) {
-        const Point2d a = loop[i];
-        const Point2d b = loop[i + 1 == n ? 0 : i + 1];
-        const double av = (a.y - grid.y0) * inv, bv = (b.y - grid.y0) * inv;
-        if (av == bv) continue;  // horizontal: encloses no area of its own
-        const bool upward = av < bv;
-        const double v0 = upward ? av : bv, v1 = upward ? bv : av;
-        if (v1 <= 0.0 || v0 >= top) continue;
-        const double u0 = ((upward ? a.x : b.x) - grid.x0) * inv;
-        const double u1 = ((upward ? b.x : a.x) - grid.x0) * inv;
-        double slope = (u1 - u0) / (v1 - v0);
-        if (!std::isfinite(slope)) slope = 0.0;
-        const uint32_t first = v0 <= 0.0 ? 0 : static_cast<uint32_t>(v0);
-        const uint32_t end = v1 >= top ? height : static_cast<uint32_t>(std::ceil(v1));
-        if (first >= end) continue;
-        const int32_t winding = upward ? -set.sign : set.sign;
-        ids[i] = static_cast<int32_t>(edges.size());
-        edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
-                                     static_cast<uint32_t>(edges.size()), -1});
-      }
-      // The edge continuing each one upwards: the next edge of the loop for an upward edge, the
-      // previous one for a downward edge, when it runs the same way (else the chain ends there).
-      for (std::size_t i = 0; i < n; ++i) {
-        if (ids[i] < 0) continue;
-        CoverageEdge& e = edges[static_cast<std::size_t>(ids[i])];
-        const bool upward = e.winding == -set.sign;
-        const int32_t other = ids[upward ? (i + 1 == n ? 0 : i + 1) : (i == 0 ? n - 1 : i - 1)];
-        if (other >= 0 && edges[static_cast<std::size_t>(other)].winding == e.winding) e.above = other;
-      }
+  forEachClosedFiniteLoop(sets, [&](std::span<const Point2d> loop, int32_t sign) {
+    const std::size_t n = loop.size();
+    std::vector<int32_t>& ids = scratch.loopIds;
+    ids.assign(n, -1);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Point2d a = loop[i];
+      const Point2d b = loop[i + 1 == n ? 0 : i + 1];
+      const double av = (a.y - grid.y0) * inv, bv = (b.y - grid.y0) * inv;
+      if (av == bv) continue;  // horizontal: encloses no area of its own
+      const bool upward = av < bv;
+      const double v0 = upward ? av : bv, v1 = upward ? bv : av;
+      if (v1 <= 0.0 || v0 >= top) continue;
+      const double u0 = ((upward ? a.x : b.x) - grid.x0) * inv;
+      const double u1 = ((upward ? b.x : a.x) - grid.x0) * inv;
+      double slope = (u1 - u0) / (v1 - v0);
+      if (!std::isfinite(slope)) slope = 0.0;
+      const uint32_t first = v0 <= 0.0 ? 0 : static_cast<uint32_t>(v0);
+      const uint32_t end = v1 >= top ? height : static_cast<uint32_t>(std::ceil(v1));
+      if (first >= end) continue;
+      const int32_t winding = upward ? -sign : sign;
+      ids[i] = static_cast<int32_t>(edges.size());
+      edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
+                                   static_cast<uint32_t>(edges.size()), -1});
     }
-  }
-  std::vector<uint32_t>& start = scratch.coverageRowStart;
-  start.assign(static_cast<std::size_t>(height) + 1, 0);
-  for (const CoverageEdge& e : edges) ++start[e.firstRow + 1];
-  for (uint32_t k = 0; k < height; ++k) start[k + 1] += start[k];
-  scratch.coverageBucketed.resize(edges.size());
-  for (const CoverageEdge& e : edges) scratch.coverageBucketed[start[e.firstRow]++] = e;
-  for (uint32_t k = height; k > 0; --k) start[k] = start[k - 1];
-  start[0] = 0;
+    // The edge continuing each one upwards: the next edge of the loop for an upward edge, the
+    // previous one for a downward edge, when it runs the same way (else the chain ends there).
+    for (std::size_t i = 0; i < n; ++i) {
+      if (ids[i] < 0) continue;
+      CoverageEdge& e = edges[static_cast<std::size_t>(ids[i])];
+      const bool upward = e.winding == -sign;
+      const int32_t other = ids[upward ? (i + 1 == n ? 0 : i + 1) : (i == 0 ? n - 1 : i - 1)];
+      if (other >= 0 && edges[static_cast<std::size_t>(other)].winding == e.winding) e.above = other;
+    }
+  });
+  bucketByFirst(
+      edges, height, [](const CoverageEdge& e) { return e.firstRow; }, scratch.coverageBucketed,
+      scratch.coverageRowStart);
   scratch.coverageActive.clear();
   scratch.pieceOfEdge.resize(edges.size());
 }
