@@ -897,6 +897,19 @@ TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
   EXPECT_NE(text.find("zip"), std::string::npos) << text;
 }
 
+// Tight row extents, as the binary rasterizer keeps them.
+void addExtents(MaskImage& m) {
+  m.litBegin.assign(m.height, m.width);
+  m.litEnd.assign(m.height, 0);
+  for (uint32_t j = 0; j < m.height; ++j) {
+    for (uint32_t i = 0; i < m.width; ++i) {
+      if (m.pixels[size_t{j} * m.width + i] == 0) continue;
+      m.litBegin[j] = std::min(m.litBegin[j], i);
+      m.litEnd[j] = i + 1;
+    }
+  }
+}
+
 // Masks that reach every path of the EXR chunk coder: rows equal to the row above (copies), dark rows,
 // noise (chunks stored raw), widths below 4 (no copies) and over 32768 (no copies), heights that end
 // on a partial 16-line chunk, and binary masks with the rasterizer's lit extents.
@@ -917,15 +930,7 @@ std::vector<MaskImage> exrTestMasks(bool antiAliased) {
   masks.push_back(lit);
   if (!antiAliased) {  // the same disc with tight lit extents, as the binary rasterizer leaves them
     MaskImage m = discMask(200, 90, 100, 45, 30, false);
-    m.litBegin.assign(m.height, m.width);
-    m.litEnd.assign(m.height, 0);
-    for (uint32_t j = 0; j < m.height; ++j) {
-      for (uint32_t i = 0; i < m.width; ++i) {
-        if (m.pixels[size_t{j} * m.width + i] == 0) continue;
-        m.litBegin[j] = std::min(m.litBegin[j], i);
-        m.litEnd[j] = i + 1;
-      }
-    }
+    addExtents(m);
     masks.push_back(m);
   }
   return masks;
@@ -1020,19 +1025,6 @@ MaskImage asRead(MaskImage m, bool antiAliased) {
   if (!antiAliased)
     for (uint8_t& p : m.pixels) p = p ? 255 : 0;
   return m;
-}
-
-// Tight row extents, as the binary rasterizer keeps them.
-void addExtents(MaskImage& m) {
-  m.litBegin.assign(m.height, m.width);
-  m.litEnd.assign(m.height, 0);
-  for (uint32_t j = 0; j < m.height; ++j) {
-    for (uint32_t i = 0; i < m.width; ++i) {
-      if (m.pixels[size_t{j} * m.width + i] == 0) continue;
-      m.litBegin[j] = std::min(m.litBegin[j], i);
-      m.litEnd[j] = i + 1;
-    }
-  }
 }
 
 TEST_F(VdbGrid, BinaryStackIsOneMaskGridWithTransformAndMetadata) {
