@@ -51,6 +51,26 @@ std::string headerName(const std::byte* header) {
   return std::string(title);
 }
 
+// Writes the corners of `count` 50-byte facet records to out[0, 3 count); true when any coordinate is
+// NaN or infinite.
+bool convertBinaryFacets(const std::byte* records, std::size_t count, Point3f* out) {
+  bool anyNonFinite = false;
+  const std::byte* record = records;
+  for (std::size_t f = 0; f < count; ++f, record += kBinaryFacetBytes, out += 3) {
+    const std::byte* corner = record + 12;  // skip the normal
+    uint32_t bits[9];
+    for (int k = 0; k < 9; ++k) {
+      bits[k] = loadLe32(corner + 4 * k);
+      anyNonFinite |= (bits[k] & 0x7F800000u) == 0x7F800000u;
+    }
+    for (int c = 0; c < 3; ++c) {
+      out[c] = {std::bit_cast<float>(bits[3 * c]), std::bit_cast<float>(bits[3 * c + 1]),
+                std::bit_cast<float>(bits[3 * c + 2])};
+    }
+  }
+  return anyNonFinite;
+}
+
 // Appends the corners of `count` 50-byte facet records; true when any coordinate is NaN or infinite.
 // The vector grows a batch at a time, so its zero-fill and the copy touch memory while it is in cache.
 bool appendBinaryFacets(const std::byte* records, std::size_t count, std::vector<Point3f>& corners) {
@@ -60,20 +80,7 @@ bool appendBinaryFacets(const std::byte* records, std::size_t count, std::vector
     const std::size_t batch = std::min(kBatch, count - first);
     const std::size_t at = corners.size();
     corners.resize(at + 3 * batch);
-    Point3f* out = corners.data() + at;
-    const std::byte* record = records + first * kBinaryFacetBytes;
-    for (std::size_t f = 0; f < batch; ++f, record += kBinaryFacetBytes, out += 3) {
-      const std::byte* corner = record + 12;  // skip the normal
-      uint32_t bits[9];
-      for (int k = 0; k < 9; ++k) {
-        bits[k] = loadLe32(corner + 4 * k);
-        anyNonFinite |= (bits[k] & 0x7F800000u) == 0x7F800000u;
-      }
-      for (int c = 0; c < 3; ++c) {
-        out[c] = {std::bit_cast<float>(bits[3 * c]), std::bit_cast<float>(bits[3 * c + 1]),
-                  std::bit_cast<float>(bits[3 * c + 2])};
-      }
-    }
+    anyNonFinite |= convertBinaryFacets(records + first * kBinaryFacetBytes, batch, corners.data() + at);
   }
   return anyNonFinite;
 }
@@ -102,7 +109,7 @@ void joinParts(std::vector<std::vector<Point3f>>& parts, std::vector<Point3f>& o
 }
 
 // `bytes` is exactly 84 + 50 * facetCount long. With a parallel runner, chunks of records are
-// converted side by side, each into its own part of the soup.
+// converted side by side, each straight into its own range of the soup.
 void parseBinary(std::span<const std::byte> bytes, uint32_t facetCount, const std::string& name,
                  StlSource& source, FacetSoup& soup, const ChunkRunner& runner) {
   source.binary = true;
@@ -116,18 +123,16 @@ void parseBinary(std::span<const std::byte> bytes, uint32_t facetCount, const st
     return;
   }
   const std::size_t chunks = (facetCount + kChunkFacets - 1) / kChunkFacets;
-  std::vector<std::vector<Point3f>> parts(chunks);
+  soup.corners.resize(std::size_t{facetCount} * 3);
   std::vector<uint8_t> nonFinite(chunks, 0);
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c) {
       const std::size_t first = c * kChunkFacets,
                         count = std::min<std::size_t>(kChunkFacets, facetCount - first);
-      parts[c].reserve(3 * count);
-      nonFinite[c] =
-          appendBinaryFacets(bytes.data() + kBinaryPrefixBytes + first * kBinaryFacetBytes, count, parts[c]);
+      nonFinite[c] = convertBinaryFacets(bytes.data() + kBinaryPrefixBytes + first * kBinaryFacetBytes, count,
+                                         soup.corners.data() + 3 * first);
     }
   });
-  joinParts(parts, soup.corners, runner);
   source.pieces = chunks;
   if (std::find(nonFinite.begin(), nonFinite.end(), 1) != nonFinite.end())
     failFirstNonFinite(soup.corners, name);
