@@ -508,6 +508,8 @@ TEST(PngEncode, ZlibInflatesEdgeCasesWithEitherCode) {
   masks.push_back(noiseMask(255, 77, 9, false));
   masks.push_back(noiseMask(1, 999, 10, false));
   masks.push_back(discMask(1001, 333, 500, 160, 150, true));
+  // One run of 8.4 MB: longer than a repeat token holds (32,000 matches of 258 bytes).
+  masks.push_back(blankMask(4000, 2100));
   for (size_t k = 0; k < masks.size(); ++k) {
     for (const MaskImage& m : {masks[k], withExtents(masks[k])}) {
       for (const MaskPngCode code : {MaskPngCode::smallest, MaskPngCode::fixed}) {

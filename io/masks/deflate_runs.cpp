@@ -41,6 +41,13 @@ constexpr std::array<uint8_t, kCodeLengthSymbols> kCodeLengthOrder = {16, 17, 18
 constexpr uint32_t kRunMatch = 256;
 constexpr uint32_t kRowMatch = kRunMatch + kMaxMatch - 2;
 constexpr uint32_t kTokenKinds = kRowMatch + kMaxMatch - 2;
+// A long run or copy is mostly matches of 258 bytes: kRepeatRun + (q - 1) stands for q of them at
+// distance 1, kRepeatRow + (q - 1) for q at the copy distance (q <= kMaxRepeat), so that pushing and
+// writing them costs one token, not one per 258 bytes.
+constexpr uint32_t kRepeatRun = kTokenKinds;
+constexpr uint32_t kMaxRepeat = 32000;
+constexpr uint32_t kRepeatRow = kRepeatRun + kMaxRepeat;
+static_assert(kRepeatRow + kMaxRepeat - 1 <= 0xFFFF, "tokens are 16-bit");
 
 // Length symbol index (0..28, symbol 257 + index) of every match length 0..258 (meaningful from 3).
 constexpr std::array<uint8_t, kMaxMatch + 1> kLengthIndex = [] {
@@ -361,7 +368,21 @@ size_t writeCodedBlock(const BlockCode& code, const BlockTables& tables, std::sp
   } else {
     w.put(0b011, 3);  // BFINAL = 1, BTYPE = 01 (fixed Huffman)
   }
-  for (const uint16_t t : tokens) w.put(tables.tokens[t].bits, tables.tokens[t].count);
+  for (const uint16_t t : tokens) {
+    if (t < kTokenKinds) [[likely]] {
+      w.put(tables.tokens[t].bits, tables.tokens[t].count);
+      continue;
+    }
+    // q matches of 258 bytes: as many codes per put as fit in 56 bits.
+    const bool row = t >= kRepeatRow;
+    uint32_t q = t - (row ? kRepeatRow : kRepeatRun) + 1;
+    const TokenCode one = tables.tokens[(row ? kRowMatch : kRunMatch) + kMaxMatch - 3];
+    const uint32_t perPut = 56 / one.count;
+    uint64_t bits = 0;
+    for (uint32_t i = 0; i < std::min(perPut, q); ++i) bits |= one.bits << (i * one.count);
+    for (; q >= perPut; q -= perPut) w.put(bits, perPut * one.count);
+    if (q > 0) w.put(bits & ((uint64_t{1} << (q * one.count)) - 1), q * one.count);
+  }
   w.put(tables.litLenCodes[kEndOfBlock], code.litLen[kEndOfBlock]);
   return w.finish();
 }
@@ -387,12 +408,37 @@ void RunDeflater::push(uint32_t token) {
     tokens_.resize(std::max<size_t>(4096, 2 * size_));
   tokens_[size_++] = static_cast<uint16_t>(token);
   ++counts_[token];
+  ++expanded_;
+}
+
+// q matches of 258 bytes of `kind` (kRunMatch, kRowMatch), as repeat tokens.
+void RunDeflater::pushLongest(uint64_t q, uint32_t kind) {
+  const uint32_t longest = kind + kMaxMatch - 3;
+  const uint32_t repeat = kind == kRunMatch ? kRepeatRun : kRepeatRow;
+  while (q > 0) {
+    const auto take = static_cast<uint32_t>(std::min<uint64_t>(q, kMaxRepeat));
+    if (take == 1) {
+      push(longest);
+    } else {
+      if (size_ == tokens_.size()) [[unlikely]]
+        tokens_.resize(std::max<size_t>(4096, 2 * size_));
+      tokens_[size_++] = static_cast<uint16_t>(repeat + take - 1);
+      counts_[longest] += take;
+      expanded_ += take;
+    }
+    q -= take;
+  }
 }
 
 // `n` bytes that repeat the stream at the distance of `kind` (kRunMatch, kRowMatch), as matches of at
 // most 258 bytes; a remainder of 1 or 2 bytes (only when n < 3 to begin with) goes out as literals of
 // the last byte (only runs have one).
 void RunDeflater::putMatches(uint64_t n, uint32_t kind) {
+  // All but the last one or two matches are of 258 bytes.
+  uint64_t longest = n / kMaxMatch;
+  if (longest > 0 && (n % kMaxMatch == 1 || n % kMaxMatch == 2)) --longest;
+  pushLongest(longest, kind);
+  n -= longest * kMaxMatch;
   while (n >= 3) {
     uint64_t take = std::min<uint64_t>(n, kMaxMatch);
     if (n - take == 1 || n - take == 2) take = n - 3;  // leave a remainder a match can still take
@@ -433,14 +479,15 @@ size_t RunDeflater::endStream() {
   flush();
   last_ = -1;
   streamEnds_.push_back(size_);
+  streamMatches_.push_back(expanded_);
   return streamEnds_.size() - 1;
 }
 
 size_t RunDeflater::streamBound(size_t stream) const {
-  const size_t begin = stream == 0 ? 0 : streamEnds_[stream - 1];
-  // Dynamic header: 17 bits, 19 x 3 bits, at most 316 code-length items of 7 + 7 bits. Tokens: at most
-  // 15 + 5 + 15 + 13 bits each.
-  return (17 + 57 + 316 * 14 + uint64_t{streamEnds_[stream] - begin + 1} * 48 + 7) / 8 + 8;
+  const uint64_t begin = stream == 0 ? 0 : streamMatches_[stream - 1];
+  // Dynamic header: 17 bits, 19 x 3 bits, at most 316 code-length items of 7 + 7 bits. Literals and
+  // matches: at most 15 + 5 + 15 + 13 bits each.
+  return (17 + 57 + 316 * 14 + (streamMatches_[stream] - begin + 1) * 48 + 7) / 8 + 8;
 }
 
 size_t RunDeflater::writeStream(size_t stream, std::vector<uint8_t>& out, size_t at, DeflateCode code) {

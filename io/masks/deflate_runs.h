@@ -3,7 +3,8 @@
 //
 // A stream is given as runs (`count` bytes of one value) and copies (bytes repeating those a fixed
 // distance back, e.g. the row above). The only deflate matches are runs (distance 1) and copies at that
-// distance, collected as tokens (2 bytes each, in a DeflateScratch) with their counts; writeBlock then
+// distance, collected as tokens (2 bytes each, in a DeflateScratch; one token stands for a series of
+// 258-byte matches, so a long run costs one token, not one per 258 bytes) with their counts; writeBlock then
 // builds length-limited canonical Huffman codes from the counts (package-merge) and writes one final
 // block with this dynamic code (RFC 1951 3.2.7), or with the fixed code (3.2.6) when that is not larger.
 // Output is a pure function of the runs and copies given: same calls, same bytes.
@@ -58,6 +59,7 @@ class RunDeflater {
   void push(uint32_t token);
   void flush();
   void putMatches(uint64_t n, uint32_t kind);
+  void pushLongest(uint64_t q, uint32_t kind);
   size_t streamBound(size_t stream) const;
 
   std::vector<uint16_t>& tokens_;
@@ -66,7 +68,9 @@ class RunDeflater {
   uint32_t copyDistance_;
   int last_ = -1;                   // last byte of the stream so far, -1 before the first
   uint64_t pending_ = 0;            // bytes equal to last_ at the end of the stream, not yet sent as tokens
+  uint64_t expanded_ = 0;           // literals and matches so far (a repeat token stands for many)
   std::vector<size_t> streamEnds_;  // token count at the end of each stream
+  std::vector<uint64_t> streamMatches_;  // expanded_ at the end of each stream
   std::unique_ptr<Plan> plan_;
 };
 
