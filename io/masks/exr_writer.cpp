@@ -99,6 +99,21 @@ uint32_t tokenizeZipChunk(const MaskImage& mask, uint32_t y0, uint32_t lines, bo
   RunAdler32 adler;
   int previous = -1;  // the raw byte before, -1 at the start of the chunk
   for (const std::array<uint8_t, 256>* bytes : {&half.low, &half.high}) {
+    // A plane of one byte value (the low bytes of a binary mask: 0 and 1.0 are 0x0000 and 0x3C00) is
+    // its first delta and then 128s: the same bytes and tokens as line by line, without the lines.
+    const uint8_t planeRaw = (*bytes)[runs.front() >> 24];
+    if (std::all_of(runs.begin(), runs.end(), [&](uint32_t r) { return (*bytes)[r >> 24] == planeRaw; })) {
+      const uint64_t size = uint64_t{width} * lines;
+      const auto delta = static_cast<uint8_t>(previous < 0 ? planeRaw : (planeRaw - previous + 128) & 0xFF);
+      previous = planeRaw;
+      adler.add(delta, 1);
+      deflater.putBytes(delta, 1);
+      if (size > 1) {
+        adler.add(128, size - 1);
+        deflater.putBytes(128, size - 1);
+      }
+      continue;
+    }
     for (uint32_t i = 0; i < lines; ++i) {
       const std::span<const uint32_t> line(runs.data() + lineStart[i], lineStart[i + 1] - lineStart[i]);
       // A line equal to the one above has the same deltas after its first byte: that byte, then a copy.
