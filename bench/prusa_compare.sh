@@ -17,6 +17,9 @@
 #       CORRECTIONS    printer corrections given to both, by their shared names, e.g.
 #                      "--absolute-correction 0.05 --elefant-foot-compensation 0.2 --relative-correction-x 1.02"
 #                      (PrusaSlicer's option names are toposlice's: see docs/FORMATS.md, "Profile files")
+#       FORMATS        toposlice's mask formats to time against PrusaSlicer's SL1 (default "sl1"; any of
+#                      sl1 exr vdb goo nanodlp png, "all" for every one): the same job written to each,
+#                      one run each after the SL1 comparison, in a table of wall, CPU, peak and size
 #       ANTIALIAS=1    anti-aliased masks on both sides: PrusaSlicer --gamma-correction 1 (AGG coverage,
 #                      no gamma), toposlice --antialias (exact coverage); compare the sums of pixel values
 #
@@ -58,12 +61,17 @@ orientation=${PRUSA_ORIENTATION:-portrait}
 mirror_x=${PRUSA_MIRROR_X:-1}
 mirror_y=${PRUSA_MIRROR_Y:-0}
 keep=${KEEP:-1}
+formats=${FORMATS:-sl1}
+[ "$formats" = all ] && formats="sl1 exr vdb goo nanodlp png"
 
 die() { echo "prusa_compare: $*" >&2; exit 1; }
 [ -f "$model" ] || die "no model file '$model'"
 model=$(realpath "$model")
 case $orientation in landscape|portrait) ;; *) die "PRUSA_ORIENTATION must be landscape or portrait" ;; esac
 case $mirror_x$mirror_y in [01][01]) ;; *) die "PRUSA_MIRROR_X / PRUSA_MIRROR_Y must be 0 or 1" ;; esac
+for f in $formats; do
+  case $f in sl1|exr|vdb|goo|nanodlp|png) ;; *) die "FORMATS: unknown format '$f' (sl1 exr vdb goo nanodlp png, or all)" ;; esac
+done
 mkdir -p "$work"
 work=$(cd "$work" && pwd)
 
@@ -203,4 +211,39 @@ ratio() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%.1f", a / b }'; }
   echo "- per-layer CSV: $work/agreement.csv; logs and /usr/bin/time -v output: $work"
 } | tee "$work/summary.md"
 
-if [ "$keep" = 0 ]; then rm -f "$prusa_out" "$topo_out"; fi
+# --- every other mask format, the same job, against PrusaSlicer's SL1 ------------------------------------
+format_out() {  # the output path of format $1 (a PNG stack is a folder)
+  case $1 in png) echo "$work/toposlice_png" ;; *) echo "$work/toposlice.$1" ;; esac
+}
+others=()
+for f in $formats; do [ "$f" = sl1 ] || others+=("$f"); done
+if [ ${#others[@]} -gt 0 ]; then
+  rows=()
+  for f in "${others[@]}"; do
+    out=$(format_out "$f")
+    # --force: replaces only what toposlice wrote there before; anything else in the way is an error.
+    cmd=("$toposlice" slice "$stl" --layer-height "$h" --layers "$layers" --printer sl1 "${topo_flags[@]}"
+      --masks "$out" --quiet --force)
+    echo "toposlice ($f): ${cmd[*]}"
+    /usr/bin/time -v -o "$work/toposlice.$f.time" "${cmd[@]}" > "$work/toposlice.$f.log" 2>&1 ||
+      { cat "$work/toposlice.$f.log" >&2; die "toposlice ($f) failed"; }
+    ft=$(elapsed_s "$work/toposlice.$f.time")
+    rows+=("| \`.$f\` | $ft s | $(cpu_s "$work/toposlice.$f.time") s | $(peak_mb "$work/toposlice.$f.time") MB | $(du -sb "$out" | cut -f1) B | $(ratio "$pt" "$ft") |")
+  done
+  {
+    echo
+    echo "### Every mask format of toposlice against PrusaSlicer's SL1 ($pt s, $pc s CPU, $pm MB)"
+    echo
+    echo "| toposlice output | wall | CPU (user + sys) | peak RSS | size | PrusaSlicer SL1 wall / this wall |"
+    echo "|---|---:|---:|---:|---:|---:|"
+    echo "| \`.sl1\` | $tt s | $tc s | $tm MB | $(du -sb "$topo_out" | cut -f1) B | $(ratio "$pt" "$tt") |"
+    printf '%s\n' "${rows[@]}"
+    echo
+    echo "- each: the toposlice command above with --masks $work/toposlice.FORMAT (PNG: a folder) --force; load after: $(uptime | sed 's/.*load average: */ /')"
+  } | tee -a "$work/summary.md"
+fi
+
+if [ "$keep" = 0 ]; then
+  rm -f "$prusa_out" "$topo_out"
+  for f in "${others[@]}"; do rm -rf "$(format_out "$f")"; done
+fi
