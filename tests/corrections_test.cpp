@@ -158,12 +158,18 @@ TEST(ElephantFoot, ThinPinsSurviveAndTheBodyShrinks) {
 }
 
 TEST(ElephantFoot, FadesLinearlyOverItsLayers) {
+  // PrusaSlicer's fade (SLAPrint printer corrections): n = max(1, layers - 1), layer k gets e (n - k) / n.
   EXPECT_DOUBLE_EQ(elephantFootAt(0, 0.2, 1), 0.2);
   EXPECT_DOUBLE_EQ(elephantFootAt(1, 0.2, 1), 0.0);
+  EXPECT_DOUBLE_EQ(elephantFootAt(0, 0.2, 2), 0.2);
+  EXPECT_DOUBLE_EQ(elephantFootAt(1, 0.2, 2), 0.0);
   EXPECT_DOUBLE_EQ(elephantFootAt(0, 0.2, 4), 0.2);
-  EXPECT_DOUBLE_EQ(elephantFootAt(1, 0.2, 4), 0.15);
-  EXPECT_DOUBLE_EQ(elephantFootAt(3, 0.2, 4), 0.05);
+  EXPECT_DOUBLE_EQ(elephantFootAt(1, 0.2, 4), 0.2 * 2 / 3);
+  EXPECT_DOUBLE_EQ(elephantFootAt(2, 0.2, 4), 0.2 / 3);
+  EXPECT_DOUBLE_EQ(elephantFootAt(3, 0.2, 4), 0.0);
   EXPECT_DOUBLE_EQ(elephantFootAt(4, 0.2, 4), 0.0);
+  EXPECT_DOUBLE_EQ(elephantFootAt(9, 0.2, 10), 0.0);
+  EXPECT_DOUBLE_EQ(elephantFootAt(8, 0.2, 10), 0.2 / 9);
 }
 
 TEST(MaskCorrections, GammaAndLightMap) {
@@ -256,7 +262,10 @@ TEST_F(CorrectionsCli, CylinderEachCorrectionAloneAndCombined) {
       // The 720-gon scaled by (sx, sy) is an ellipse to within 1e-4 of its area; the offset adds
       // perimeter x d (+ pi d^2 for a disc).
       const double a = r * c.sx, b = r * c.sy;
-      double d = c.absolute - (k == 0 ? c.foot : 0);
+      // The elephant foot fades over the default faded_layers (10) as PrusaSlicer fades it: layer k
+      // gets foot (n - k) / n, n = 9.
+      const double n = 9;
+      double d = c.absolute - (k < 10 ? c.foot * (n - static_cast<double>(k)) / n : 0);
       const double perimeter = std::numbers::pi * (3 * (a + b) - std::sqrt((3 * a + b) * (a + 3 * b)));
       const double expected = std::numbers::pi * a * b + perimeter * d + std::numbers::pi * d * d;
       EXPECT_NEAR(areas[k], expected, perimeter * pixel + 0.01)

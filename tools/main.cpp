@@ -232,8 +232,11 @@ int explainSettings(const std::string& model, const SliceJobOptions& options) {
       "offsets    : absolute %s mm on every layer; elephant foot %s mm on layer 0%s, sparing features "
       "narrower than %s mm\n",
       formatNumber(p.absoluteCorrection).c_str(), formatNumber(p.elefantFootCompensation).c_str(),
-      p.elefantFootLayers > 1 ? (", fading over " + std::to_string(p.elefantFootLayers) + " layers").c_str()
-                              : "",
+      p.elephantFootFadeLayers() > 1
+          ? (", fading to 0 over " + std::to_string(p.elephantFootFadeLayers()) + " layers" +
+             (p.elefantFootLayers > 0 ? "" : " (faded_layers, as PrusaSlicer)"))
+                .c_str()
+          : "",
       formatNumber(p.elefantFootMinWidth).c_str());
   const bool antialias = options.masks.antialias || (p.gammaCorrection && *p.gammaCorrection > 0);
   if (options.masks.output.empty()) {

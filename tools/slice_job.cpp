@@ -627,6 +627,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   // run without a report prints no volume, so it skips that pass over every point.
   const bool measureLayers = masks || report || !options.summary.empty();
   const bool correcting = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+  // PrusaSlicer fades the elephant foot over min(layer count, faded layers).
+  const auto elephantFootLayers =
+      static_cast<uint32_t>(std::clamp<std::size_t>(planes.size(), 1, print.elephantFootFadeLayers()));
   stages.process = [&](uint32_t k, std::span<const LayerContours> sliced, std::size_t slot,
                        uint32_t position) {
     SlotState& s = slots[slot];
@@ -635,9 +638,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (correcting) {
       // Absolute correction and elephant foot on the layer's solid region (model, add-ons and removals
       // under the positive rule): every output below and in consume sees the corrected layer.
-      const LayerCorrection correction{
-          print.absoluteCorrection, elephantFootAt(k, print.elefantFootCompensation, print.elefantFootLayers),
-          print.elefantFootMinWidth};
+      const LayerCorrection correction{print.absoluteCorrection,
+                                       elephantFootAt(k, print.elefantFootCompensation, elephantFootLayers),
+                                       print.elefantFootMinWidth};
       r.corrected.resize(sliced.size());
       s.sets.clear();
       for (std::size_t i = 0; i < sliced.size(); ++i)

@@ -1,5 +1,6 @@
 #include "core/print/corrections.h"
 
+#include <algorithm>
 #include <cassert>
 #include <cmath>
 
@@ -21,7 +22,8 @@ void scaleCorners(std::span<Point3f> corners, const std::array<double, 3>& facto
 double elephantFootAt(uint32_t k, double amount, uint32_t layers) {
   assert(layers >= 1);
   if (k >= layers || !(amount > 0)) return 0.0;
-  return amount * static_cast<double>(layers - k) / static_cast<double>(layers);
+  const uint32_t n = std::max<uint32_t>(1, layers - 1);
+  return amount * static_cast<double>(n - k) / static_cast<double>(n);
 }
 
 std::array<uint8_t, 256> gammaTable(double gamma) {

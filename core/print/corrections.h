@@ -21,8 +21,11 @@ std::array<double, 3> scaleCentre(const BoundingBox& box);
 void scaleCorners(std::span<Point3f> corners, const std::array<double, 3>& factors,
                   const std::array<double, 3>& centre);
 
-// Elephant-foot shrink of layer `k` (0 = the bottom layer): `amount` on layer 0, fading linearly to
-// nothing over `layers` layers (amount * (layers - k) / layers for k < layers, else 0). layers >= 1.
+// Elephant-foot shrink of layer `k` (0 = the bottom layer) over the first `layers` layers, as
+// PrusaSlicer's SLA printer corrections fade it over the material's faded layers: with
+// n = max(1, layers - 1), layer k < layers gets amount * (n - k) / n (the full amount on layer 0,
+// nothing on layer layers - 1 when layers > 1), later layers 0. layers >= 1; the caller limits it to the
+// job's layer count, as PrusaSlicer does.
 double elephantFootAt(uint32_t k, double amount, uint32_t layers);
 
 // Table of the anti-aliasing gamma applied to 8-bit coverage v: round(255 * (v / 255)^gamma); gamma = 1

@@ -83,7 +83,10 @@ const SettingKey kKeys[] = {
     {"absolute_correction", P, "mm; every slice grown (+) or shrunk (-) by this distance", false},
     {"elefant_foot_compensation", P, "mm; the first layer(s) shrunk by this distance", false},
     {"elefant_foot_min_width", P, "mm; features narrower than this keep their width", false},
-    {"elefant_foot_layers", P, "layers over which the elephant-foot shrink fades to 0 (default 1)", true},
+    {"elefant_foot_layers", P,
+     "layers over which the elephant-foot shrink fades to 0 (default: the material's faded_layers, as "
+     "PrusaSlicer)",
+     true},
     {"gamma_correction", P, "anti-aliasing gamma; 0: binary masks (pixel-centre rule); 1: linear coverage",
      false},
     {"light_map", P, "grayscale PNG of the display's relative intensity, multiplied into every layer", true},
@@ -119,7 +122,10 @@ KeyRule ruleOf(std::string_view key) {
   if (key == "absolute_correction") return number(-10, false, 10, TS_NUMBER(absoluteCorrection));
   if (key == "elefant_foot_compensation") return number(0, false, 10, TS_NUMBER(elefantFootCompensation));
   if (key == "elefant_foot_min_width") return number(0, false, 100, TS_NUMBER(elefantFootMinWidth));
-  if (key == "elefant_foot_layers") return count(1, 10000, TS_COUNT(elefantFootLayers));
+  if (key == "elefant_foot_layers")
+    return count(
+        1, 10000, [](PrintSettings& s) -> uint32_t& { return s.elefantFootLayers; },
+        [](const PrintSettings& s) { return std::to_string(s.elephantFootFadeLayers()); });
   if (key == "gamma_correction")
     return number(
         0, false, 10, [](PrintSettings& s) -> double& { return s.gammaCorrection.emplace(); },

@@ -39,7 +39,7 @@ struct PrintSettings {
   double absoluteCorrection = 0;                      // absolute_correction, mm
   double elefantFootCompensation = 0;                 // elefant_foot_compensation, mm
   double elefantFootMinWidth = 0.2;                   // elefant_foot_min_width, mm
-  uint32_t elefantFootLayers = 1;                     // elefant_foot_layers (toposlice): layers of the fade
+  uint32_t elefantFootLayers = 0;                     // elefant_foot_layers (toposlice); 0: faded_layers
   std::optional<double> gammaCorrection;              // gamma_correction; unset: --antialias decides
   std::filesystem::path lightMap;                     // light_map (toposlice): grayscale PNG; empty: none
   // Platform motion and light (toposlice keys; written where printer files carry them: GOO, NanoDLP).
@@ -55,6 +55,9 @@ struct PrintSettings {
   uint32_t fadedLayers = 10;                          // faded_layers
   std::array<double, 3> materialCorrection{1, 1, 1};  // material_correction_x / _y / _z
   double materialDensity = 1.0;                       // material_density, g/ml
+  // Layers over which the elephant-foot shrink fades: elefant_foot_layers when set, else faded_layers
+  // (PrusaSlicer applies it over the material's faded layers).
+  uint32_t elephantFootFadeLayers() const { return elefantFootLayers > 0 ? elefantFootLayers : fadedLayers; }
   // Where each key's value came from when not the default ("printer sl1", "profile lab.json printer
   // lab-sl1", "command line"), by key.
   std::map<std::string, std::string> origin;
