@@ -50,4 +50,19 @@ struct LayerCorrection {
 std::size_t correctLayer(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                          LayerContours& out);
 
+// The corrected region as loops for a rasterizer, without the union that correctLayer's offset ends
+// with. Only when `correction` grows a single positive set (absolute > 0, no elephant foot; returns
+// false otherwise, `out` untouched): Clipper's offset of a closed outline is the positive-winding union
+// of its raw offset loops (each edge moved out by the distance; a mitred or squared join at a convex
+// vertex; at a concave vertex a detour through the vertex itself), and the rasterizers apply the
+// positive rule themselves. The loops are those ClipperOffset builds, point for point (the same
+// cleaning, orientation fix, normals, joins and rounding to integer nanometres): their positive-winding
+// union (unitePositive) is exactly correctLayer's result, so masks of either are the same region.
+bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
+                       LayerContours& out);
+
+// The positive-winding region of `loops` (all closed) as clean polygons into `out` (cleared first; out.z =
+// z): Clipper's union, as correctLayer's offset ends. Returns the number of loops written.
+std::size_t unitePositive(const LayerContours& loops, double z, LayerContours& out);
+
 }  // namespace toposlice

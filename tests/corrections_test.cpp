@@ -114,6 +114,110 @@ TEST(PolygonOffset, SelfIntersectingAndVanishingLoops) {
   EXPECT_NEAR(correctedArea(touching, {0.1, 0, 0}), 2.2 * 1.2, 1e-5);
 }
 
+// Shapes that reach every join of the raw offset: straight runs (nearly collinear points), mitred and
+// squared-off convex corners, concave corners, an inside-out loop (the orientation fix), loops that
+// overlap, touch or cross themselves.
+std::vector<LayerContours> rawOffsetShapes() {
+  std::vector<LayerContours> shapes(10);
+  addRect(shapes[0], 0, 0, 10, 6);
+  addPolygon(shapes[1], 1, 2, 3, 360);
+  std::vector<Point2d> star;  // sharp tips (squared off) and concave notches
+  for (int i = 0; i < 10; ++i) {
+    const double a = 2 * std::numbers::pi * i / 10, r = i % 2 ? 0.6 : 3.0;
+    star.push_back({r * std::cos(a), r * std::sin(a)});
+  }
+  addLoop(shapes[2], star);
+  addLoop(shapes[3], {{0, 0}, {0, 4}, {4, 4}, {4, 0}});  // clockwise: inside out
+  addRect(shapes[4], 0, 0, 4, 4);
+  addRect(shapes[4], 2, 1, 6, 5);
+  addRect(shapes[5], 0, 0, 1, 1);
+  addRect(shapes[5], 1, 0, 2, 1);
+  addLoop(shapes[6], {{0, 0}, {2, 2}, {2, 0}, {0, 2}});  // a bow tie
+  std::vector<Point2d> wavy;  // a dense, jagged outline: points a fraction of a micrometre off a line
+  for (int i = 0; i <= 400; ++i) wavy.push_back({0.01 * i, 0.0000003 * (i % 3)});
+  wavy.push_back({4, 1});
+  wavy.push_back({0, 1.3});
+  addLoop(shapes[7], wavy);
+  addRect(shapes[8], 0, 0, 8, 8);  // a frame: an outer loop and a clockwise hole
+  addLoop(shapes[8], {{2, 2}, {2, 6}, {6, 6}, {6, 2}});
+  addLoop(shapes[9], {{0, 0}, {4, 0}, {0, 4}});  // 45 degree corners: mitred within limit 3, not 2
+  return shapes;
+}
+
+TEST(PolygonOffset, RawLoopsUniteToTheOffsetPointForPoint) {
+  std::vector<LayerContours> shapes = rawOffsetShapes();
+  // An arc of radius 2 m in 2 mm steps: turns of 1 mrad, which outline cleaning keeps (the middle point
+  // is 1 um off its neighbours' line) and a 0.5 um offset takes as straight on.
+  LayerContours& arc = shapes.emplace_back();
+  std::vector<Point2d> points;
+  for (int i = 0; i <= 20; ++i)
+    points.push_back({2000 * std::sin(0.001 * i), 2000 * (1 - std::cos(0.001 * i))});
+  points.push_back({0, 5});
+  addLoop(arc, points);
+  for (std::size_t s = 0; s < shapes.size(); ++s) {
+    for (const double d : {0.0005, 0.05, 0.3, 1.5}) {
+      const ContourSet set{&shapes[s], 1};
+      LayerContours expected, raw, united;
+      correctLayer({&set, 1}, {d, 0, 0}, 1.0, expected);
+      ASSERT_TRUE(rawCorrectedLoops({&set, 1}, {d, 0, 0}, 1.0, raw)) << s;
+      EXPECT_EQ(raw.z, 1.0);
+      unitePositive(raw, 1.0, united);
+      ASSERT_EQ(united.loopCount(), expected.loopCount()) << "shape " << s << ", d " << d;
+      EXPECT_TRUE(united.points == expected.points) << "shape " << s << ", d " << d;
+      EXPECT_TRUE(united.loopOffsets == expected.loopOffsets) << "shape " << s << ", d " << d;
+    }
+  }
+}
+
+TEST(PolygonOffset, RawLoopsOnlyWhenTheOffsetOnlyGrows) {
+  LayerContours box, hole;
+  addRect(box, 0, 0, 10, 6);
+  addRect(hole, 4, 2, 6, 4);
+  const ContourSet one{&box, 1}, removed[] = {{&box, 1}, {&hole, -1}}, added[] = {{&box, 1}, {&hole, 1}};
+  LayerContours out;
+  EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {-0.05, 0, 0}, 0, out));     // shrinking needs the union first
+  EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {0.05, 0.1, 0.2}, 0, out));  // the elephant foot too
+  EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {0, 0, 0}, 0, out));
+  EXPECT_FALSE(rawCorrectedLoops(removed, {0.05, 0, 0}, 0, out));
+  EXPECT_FALSE(rawCorrectedLoops(added, {0.05, 0, 0}, 0, out));
+  EXPECT_EQ(out.loopCount(), 0u);
+  EXPECT_TRUE(rawCorrectedLoops({&one, 1}, {0.05, 0, 0}, 0, out));
+}
+
+TEST(PolygonOffset, RawLoopsRasterizeToTheOffsetsMasks) {
+  // The rasterizers' positive rule does the union: the same binary pixels, and anti-aliased values
+  // within one level (the united outline's crossing points are rounded to integer nanometres).
+  const std::vector<LayerContours> shapes = rawOffsetShapes();
+  PixelGrid grid;
+  grid.x0 = -5.013;
+  grid.y0 = -5.007;
+  grid.pixel = 0.0473;
+  grid.width = 360;
+  grid.height = 330;
+  RasterScratch scratch;
+  for (std::size_t s = 0; s < shapes.size(); ++s) {
+    for (const double d : {0.05, 0.3}) {
+      const ContourSet set{&shapes[s], 1};
+      LayerContours polygons, raw;
+      correctLayer({&set, 1}, {d, 0, 0}, 0.0, polygons);
+      ASSERT_TRUE(rawCorrectedLoops({&set, 1}, {d, 0, 0}, 0.0, raw));
+      const ContourSet a{&polygons, 1}, b{&raw, 1};
+      MaskImage ma, mb;
+      uint64_t litA = 0, litB = 0;
+      rasterizeBinary({&a, 1}, grid, ma, scratch, &litA);
+      rasterizeBinary({&b, 1}, grid, mb, scratch, &litB);
+      EXPECT_GT(litA, 0u) << s;
+      EXPECT_TRUE(ma.pixels == mb.pixels) << "binary, shape " << s << ", d " << d;
+      rasterizeCoverage({&a, 1}, grid, ma, scratch);
+      rasterizeCoverage({&b, 1}, grid, mb, scratch);
+      int worst = 0;
+      for (std::size_t p = 0; p < ma.pixels.size(); ++p)
+        worst = std::max(worst, std::abs(ma.pixels[p] - mb.pixels[p]));
+      EXPECT_LE(worst, 1) << "anti-aliased, shape " << s << ", d " << d;
+    }
+  }
+}
+
 TEST(ElephantFoot, ThinPinsSurviveAndTheBodyShrinks) {
   // A 10 x 10 box with two pins 0.1 mm wide and 1 mm long on its right side.
   LayerContours part;
@@ -300,6 +404,24 @@ TEST_F(CorrectionsCli, ProfileFileSettingsReachTheSl1) {
   EXPECT_NE(summary.find("\"exposure_time\": \"7\""), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"material\": \"dental\""), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"resin_mass_g\""), std::string::npos) << summary;
+}
+
+TEST_F(CorrectionsCli, GrowingMasksAreTheSameWithOrWithoutContourOutputs) {
+  // Masks alone rasterize the raw offset loops; with a contour output or a report the polygons are made
+  // too. The archive must not depend on it (byte for byte, binary; anti-aliased masks always use the
+  // polygons). The shrinking and elephant-foot cases go through the polygons either way.
+  for (const char* correction : {"0.05", "0.3", "-0.05"}) {
+    const std::vector<std::string> common{"slice", examplePart().string(),  "-H",       "0.1", "--printer",
+                                          "sl1",   "--absolute-correction", correction, "-f",  "-q"};
+    std::vector<std::string> alone = common, withContours = common;
+    alone.insert(alone.end(), {"--masks", path("alone.sl1").string()});
+    withContours.insert(withContours.end(), {"--masks", path("with.sl1").string(), "-o",
+                                             path("c.cli").string(), "--report", path("r.csv").string()});
+    const RunResult a = this->run(alone), b = this->run(withContours);
+    ASSERT_EQ(a.code(), 0) << a.describe();
+    ASSERT_EQ(b.code(), 0) << b.describe();
+    EXPECT_TRUE(readBytes(path("alone.sl1")) == readBytes(path("with.sl1"))) << correction;
+  }
 }
 
 TEST_F(CorrectionsCli, BadSettingsAreNamed) {

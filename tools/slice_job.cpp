@@ -604,6 +604,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   struct LayerResult {
     EncodedMaskLayer encoded;              // the mask as the sink encoded it (a PNG, an EXR file, mask runs)
     std::vector<LayerContours> corrected;  // with corrections: the corrected layer, then empty features
+    LayerContours rawLoops;                // with a growing correction: the masks' raw offset loops
+    bool raw = false;                      // the masks rasterize rawLoops
     std::vector<TextBuffer> contourBytes;  // per contour sink that encodes its layers (CLI)
     double area = 0;
     uint64_t islands = 0;
@@ -627,6 +629,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   // run without a report prints no volume, so it skips that pass over every point.
   const bool measureLayers = masks || report || !options.summary.empty();
   const bool correcting = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+  const bool polygonsNeeded = !sinks.empty() || report != nullptr;  // outputs made of the corrected loops
   // PrusaSlicer fades the elephant foot over min(layer count, faded layers).
   const auto elephantFootLayers =
       static_cast<uint32_t>(std::clamp<std::size_t>(planes.size(), 1, print.elephantFootFadeLayers()));
@@ -645,7 +648,16 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       s.sets.clear();
       for (std::size_t i = 0; i < sliced.size(); ++i)
         s.sets.push_back({&sliced[i], i == 0 || i <= addCount ? 1 : -1});
-      correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
+      // A correction that only grows, binary masks: the masks rasterize the raw offset loops, whose
+      // positive-winding region is the corrected one (polygon_offset.h), so the union is made only when
+      // contour outputs or the report need the polygons. Masks are the same either way. (The exact
+      // coverage rasterizer cuts a row at every crossing, and raw loops cross at every concave vertex:
+      // anti-aliased masks are faster from the polygons.)
+      r.raw = masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, sliced[0].z, r.rawLoops);
+      if (!r.raw || polygonsNeeded)
+        correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
+      else
+        r.corrected[0].clear(sliced[0].z);
       for (std::size_t i = 1; i < sliced.size(); ++i) r.corrected[i].clear(sliced[i].z);
       layer = r.corrected;
     }
@@ -665,8 +677,11 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       return;
     }
     s.sets.clear();
-    for (std::size_t i = 0; i < layer.size(); ++i)
-      s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
+    if (correcting && r.raw)
+      s.sets.push_back({&r.rawLoops, 1});
+    else
+      for (std::size_t i = 0; i < layer.size(); ++i)
+        s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
     r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, gamma ? gammaLut.data() : nullptr,
                                 lightMap.pixels.empty() ? nullptr : &lightMap);
     maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
