@@ -13,6 +13,10 @@
 #       KEEP=0         delete the two archives at the end (default 1: keep them)
 #       PRUSA_ORIENTATION, PRUSA_MIRROR_X, PRUSA_MIRROR_Y
 #                      PrusaSlicer's display settings (default: the Original Prusa SL1 preset: portrait, 1, 0)
+#       TOPO_PORTRAIT=0
+#                      toposlice writes landscape images and compare_masks --transpose maps them (the
+#                      default, 1, has toposlice write PrusaSlicer's display orientation and mirroring
+#                      too, compared as they are)
 #       THREADS        toposlice --threads (default: all cores; PrusaSlicer always uses all cores)
 #       CORRECTIONS    printer corrections given to both, by their shared names, e.g.
 #                      "--absolute-correction 0.05 --elefant-foot-compensation 0.2 --relative-correction-x 1.02"
@@ -27,7 +31,8 @@
 # - Printer: PrusaSlicer gets the Original Prusa SL1 preset's printer settings (bed 1.48..119.48 x
 #   1.02..67.02 mm, display 120.96 x 68.04 mm, 2560 x 1440 px, portrait, display_mirror_x = 1 as the
 #   default, display_mirror_y = 0) from a --load file, since 2.5's CLI cannot select a vendor preset.
-#   toposlice gets --printer sl1 (2560 x 1440 at 0.04725 mm = 120.96 / 2560 = 68.04 / 1440).
+#   toposlice gets --printer sl1 (2560 x 1440 at 0.04725 mm = 120.96 / 2560 = 68.04 / 1440, portrait,
+#   display_mirror_x = 1: the same display) with PrusaSlicer's orientation and mirror flags set by name.
 # - Placement: PrusaSlicer rasterizes bed coordinates, bed (0, 0) at the display's corner, so the display
 #   covers [0, 120.96] x [0, 68.04] mm. `--center 60.48,34.02 --dont-arrange` moves the model's xy
 #   bounding-box centre to the display centre (Model::center_instances_around_point) and does not run the
@@ -38,8 +43,10 @@
 #   (x right, y up) with display_mirror_x = toposlice --mirror-x and display_mirror_y = --mirror-y. In
 #   portrait (the SL1's 1440 x 2560 PNGs), PrusaSlicer's PNG is the transpose of toposlice's: bed x runs
 #   up the rows, bed y along the columns; display_mirror_x = 0 then means toposlice --mirror-y and
-#   display_mirror_y = 1 means --mirror-x (the SL1 default, 1 / 0, is a plain transpose).
-#   compare_masks --transpose compares the two that way.
+#   display_mirror_y = 1 means --mirror-x (the SL1 default, 1 / 0, is a plain transpose of the
+#   images as stored bottom row first). compare_masks --transpose compares the two that way
+#   (TOPO_PORTRAIT=0). By default toposlice writes the portrait images itself (display_orientation =
+#   portrait, the same mirror flags) and they are compared as they are.
 # - Binary masks: --gamma-correction 0 (AGG coverage thresholded at 1/2; toposlice lights a pixel whose
 #   centre is inside: the same for any edge that is straight across the pixel), --slice-closing-radius 0,
 #   no supports, no pad (so no elevation), no hollowing, no corrections (defaults).
@@ -152,10 +159,16 @@ layers=$(unzip -p "$prusa_out" config.ini | awk -F' = ' '$1 == "numFast" { f = $
 # --- toposlice -----------------------------------------------------------------------------------------
 topo_flags=()
 transpose=()
-if [ "$orientation" = landscape ]; then
+if [ "${TOPO_PORTRAIT:-1}" = 1 ]; then
+  # The same display settings by the same names: toposlice writes PrusaSlicer's images.
+  topo_flags+=(--set "display_orientation=$orientation" --set "display_mirror_x=$mirror_x"
+    --set "display_mirror_y=$mirror_y")
+elif [ "$orientation" = landscape ]; then
+  topo_flags+=(--set display_orientation=landscape --set display_mirror_x=0)
   [ "$mirror_x" = 1 ] && topo_flags+=(--mirror-x)
   [ "$mirror_y" = 1 ] && topo_flags+=(--mirror-y)
 else
+  topo_flags+=(--set display_orientation=landscape --set display_mirror_x=0)
   transpose=(--transpose)
   [ "$mirror_x" = 0 ] && topo_flags+=(--mirror-y)
   [ "$mirror_y" = 1 ] && topo_flags+=(--mirror-x)

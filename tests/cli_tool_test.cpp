@@ -408,6 +408,111 @@ std::map<std::string, std::vector<uint8_t>> sl1Layers(const fs::path& file) {
   return layers;
 }
 
+// The prusaslicer.ini of an SL1 archive as key -> value.
+std::map<std::string, std::string> sl1PrusaSlicerIni(const fs::path& file) {
+  std::map<std::string, std::string> ini;
+  int err = 0;
+  zip_t* zip = zip_open(file.c_str(), ZIP_RDONLY, &err);
+  if (zip == nullptr) return ini;
+  zip_stat_t st;
+  zip_stat_init(&st);
+  if (zip_stat(zip, "prusaslicer.ini", 0, &st) == 0) {
+    std::string text(st.size, '\0');
+    zip_file_t* f = zip_fopen(zip, "prusaslicer.ini", 0);
+    if (f != nullptr && zip_fread(f, text.data(), st.size) == static_cast<zip_int64_t>(st.size)) {
+      std::istringstream in(text);
+      for (std::string line; std::getline(in, line);)
+        if (const std::size_t eq = line.find(" = "); eq != std::string::npos)
+          ini[line.substr(0, eq)] = line.substr(eq + 3);
+    }
+    if (f != nullptr) zip_fclose(f);
+  }
+  zip_close(zip);
+  return ini;
+}
+
+// The Prusa SL1 and SL1S show only images as tall as the display's long side (their firmware refuses
+// others). The presets write PrusaSlicer's portrait images: with display_mirror_x = mx and
+// display_mirror_y = my, the transpose of the landscape image mirrored by (!my, mx). Checked for every
+// mirror setting on an L-shaped part (no symmetry to hide a wrong flip); PrusaSlicer itself agrees
+// (bench/prusa_compare.sh, docs/BENCHMARKS.md).
+TEST_F(CliToolMasks, Sl1PresetsWritePortraitImagesAsPrusaSlicer) {
+  FacetSoup l = fixtures::box(0, 0, 0, 20, 4, 2);
+  fixtures::append(l, fixtures::box(0, 0, 0, 4, 12, 2));
+  writeBinaryStl(path("l.stl"), l, "L", false);
+  const auto pngOf = [](const std::vector<uint8_t>& bytes) {
+    MaskImage m;
+    EXPECT_TRUE(decodeMaskPng(bytes, m));
+    return m;
+  };
+  // Pixel (column c, row r from the top) of a decoded PNG.
+  const auto at = [](const MaskImage& m, uint32_t c, uint32_t r) {
+    return m.pixels[static_cast<std::size_t>(m.height - 1 - r) * m.width + c];
+  };
+  for (const char* printer : {"sl1", "sl1s"}) {
+    const RunResult preset = run({"slice", path("l.stl").string(), "-H", "1", "--printer", printer, "--masks",
+                                  path("p.sl1").string(), "-f", "-q"});
+    ASSERT_EQ(preset.code(), 0) << preset.describe();
+    auto ini = sl1PrusaSlicerIni(path("p.sl1"));
+    EXPECT_EQ(ini["display_orientation"], "portrait") << printer;
+    EXPECT_EQ(ini["display_mirror_x"], "1") << printer;
+    EXPECT_EQ(ini["display_mirror_y"], "0") << printer;
+    EXPECT_EQ(ini["display_pixels_x"], "2560") << printer;
+    const auto layers = sl1Layers(path("p.sl1"));
+    ASSERT_EQ(layers.size(), 2u) << printer;
+    const MaskImage first = pngOf(layers.begin()->second);
+    EXPECT_EQ(first.width, std::string(printer) == "sl1" ? 1440u : 1620u) << printer;
+    EXPECT_EQ(first.height, 2560u) << printer;
+  }
+  for (const int mx : {0, 1}) {
+    for (const int my : {0, 1}) {
+      const RunResult portrait =
+          run({"slice", path("l.stl").string(), "-H", "1", "--printer", "sl1", "--set",
+               "display_mirror_x=" + std::to_string(mx), "--set", "display_mirror_y=" + std::to_string(my),
+               "--masks", path("p.sl1").string(), "-f", "-q"});
+      std::vector<std::string> landscapeArgs{"slice",     path("l.stl").string(),
+                                             "-H",        "1",
+                                             "--printer", "sl1",
+                                             "--set",     "display_orientation=landscape",
+                                             "--set",     "display_mirror_x=0",
+                                             "--masks",   path("l.sl1").string(),
+                                             "-f",        "-q"};
+      if (!my) landscapeArgs.push_back("--mirror-x");
+      if (mx) landscapeArgs.push_back("--mirror-y");
+      const RunResult landscape = run(landscapeArgs);
+      ASSERT_EQ(portrait.code(), 0) << portrait.describe();
+      ASSERT_EQ(landscape.code(), 0) << landscape.describe();
+      auto ini = sl1PrusaSlicerIni(path("p.sl1"));
+      EXPECT_EQ(ini["display_mirror_x"], std::to_string(mx));
+      EXPECT_EQ(ini["display_mirror_y"], std::to_string(my));
+      const auto p = sl1Layers(path("p.sl1")), q = sl1Layers(path("l.sl1"));
+      ASSERT_EQ(p.size(), q.size());
+      for (auto i = p.begin(), j = q.begin(); i != p.end(); ++i, ++j) {
+        const MaskImage a = pngOf(i->second), b = pngOf(j->second);
+        ASSERT_EQ(a.width, b.height);
+        ASSERT_EQ(a.height, b.width);
+        uint64_t lit = 0, differ = 0;
+        for (uint32_t r = 0; r < a.height; ++r)
+          for (uint32_t c = 0; c < a.width; ++c) {
+            lit += at(a, c, r) != 0;
+            differ += at(a, c, r) != at(b, r, c);
+          }
+        EXPECT_GT(lit, 1000u) << i->first;
+        EXPECT_EQ(differ, 0u) << "mirror " << mx << my << ", " << i->first;
+      }
+    }
+  }
+  // Volumes and landscape printer files take the preset's grid but not its display orientation; a
+  // portrait asked for by name is refused for them.
+  const RunResult exr = run({"slice", path("l.stl").string(), "-H", "1", "--printer", "sl1", "--masks",
+                             path("v.exr").string(), "-f", "-q"});
+  EXPECT_EQ(exr.code(), 0) << exr.describe();
+  const RunResult asked = run({"slice", path("l.stl").string(), "-H", "1", "--printer", "sl1", "--set",
+                               "display_orientation=portrait", "--masks", path("w.exr").string(), "-q"});
+  expectOneErrorLine(asked);
+  EXPECT_NE(asked.err.find("SL1 archives and PNG folders only"), std::string::npos) << asked.err;
+}
+
 // EXR stacks: the same bytes for every thread count and band size, and every layer, read by tinyexr,
 // the pixels of the SL1 layer of the same run (binary and anti-aliased).
 TEST_F(CliToolDeterminism, ExrStackIsByteIdenticalAndMatchesTheSl1) {
@@ -416,7 +521,13 @@ TEST_F(CliToolDeterminism, ExrStackIsByteIdenticalAndMatchesTheSl1) {
     for (const std::vector<std::string>& extra :
          {std::vector<std::string>{"--threads", "1"}, {"--threads", "2"}, {"--band-layers", "7"}}) {
       const std::string tag = (antiAliased ? "aa" : "bin") + extra[0].substr(2, 1) + extra[1];
-      std::vector<std::string> args{"slice", examplePart().string(), "-H", "0.1", "--printer", "sl1", "-q"};
+      // The SL1 in the EXR's landscape frame (the sl1 preset's display is portrait).
+      std::vector<std::string> args{"slice",     examplePart().string(),
+                                    "-H",        "0.1",
+                                    "--printer", "sl1",
+                                    "--set",     "display_orientation=landscape",
+                                    "--set",     "display_mirror_x=0",
+                                    "-q"};
       if (antiAliased) args.push_back("--antialias");
       args.insert(args.end(), extra.begin(), extra.end());
       std::vector<std::string> exrArgs = args, sl1Args = args;

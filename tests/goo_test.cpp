@@ -417,7 +417,12 @@ using GooCli = tool_test::CliToolBase;
 
 TEST_F(GooCli, LayersEqualThePngLayersOfTheSameJob) {
   for (const bool antialias : {false, true}) {
-    std::vector<std::string> args{"slice", tool_test::examplePart().string(), "-H", "0.1", "--printer", "sl1",
+    // The PNG folder in the GOO's landscape frame (the sl1 preset's display is portrait).
+    std::vector<std::string> args{"slice",     tool_test::examplePart().string(),
+                                  "-H",        "0.1",
+                                  "--printer", "sl1",
+                                  "--set",     "display_orientation=landscape",
+                                  "--set",     "display_mirror_x=0",
                                   "-q"};
     if (antialias) args.push_back("--antialias");
     const std::string tag = antialias ? "aa" : "bin";

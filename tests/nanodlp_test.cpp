@@ -84,8 +84,13 @@ TEST(NanoDlpInfo, IslandsAreasAndBoundsOfKnownMasks) {
 using NanoDlpCli = tool_test::CliToolBase;
 
 TEST_F(NanoDlpCli, LayersEqualThePngLayersOfTheSameJob) {
-  const std::vector<std::string> args{
-      "slice", tool_test::examplePart().string(), "-H", "0.1", "--printer", "sl1", "-q"};
+  // The PNG folder in the NanoDLP file's landscape frame (the sl1 preset's display is portrait).
+  const std::vector<std::string> args{"slice",     tool_test::examplePart().string(),
+                                      "-H",        "0.1",
+                                      "--printer", "sl1",
+                                      "--set",     "display_orientation=landscape",
+                                      "--set",     "display_mirror_x=0",
+                                      "-q"};
   auto a = args, b = args, png = args;
   a.insert(a.end(), {"--masks", "p.nanodlp", "--threads", "2"});
   b.insert(b.end(), {"--masks", "p1.nanodlp", "--threads", "1"});

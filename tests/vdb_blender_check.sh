@@ -37,7 +37,10 @@ case_() {
   local name=$1 model=$2
   shift 2
   "$bin" slice "$model" "$@" --printer sl1 --masks "$tmp/$name.vdb" --summary "$tmp/$name.json" -q
-  "$bin" slice "$model" "$@" --printer sl1 --masks "$tmp/$name.sl1" -q
+  # The SL1 in the grid's landscape frame: the sl1 preset's display is portrait (PrusaSlicer's), the VDB
+  # a volume in the model's frame.
+  "$bin" slice "$model" "$@" --printer sl1 --set display_orientation=landscape --set display_mirror_x=0 \
+    --masks "$tmp/$name.sl1" -q
   local bounds
   bounds=$(python3 -c 'import json, sys
 b = json.load(open(sys.argv[1]))["bounds_mm"]

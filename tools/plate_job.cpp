@@ -112,14 +112,25 @@ struct Picture {
     image.height = (height + factor - 1) / factor;
     image.pixels.assign(static_cast<std::size_t>(image.width) * image.height, 0);
   }
-  void add(const MaskImage& mask) {
+  // A mask on `grid`. Portrait masks (PixelGrid::transposed) go back to the plate's axes, seen from
+  // above (x right, y up), so the picture shows the plate as it is laid out whatever the display.
+  void add(const MaskImage& mask, const PixelGrid& grid) {
     for (uint32_t j = 0; j < mask.height; ++j) {
       uint32_t a = 0, b = mask.width;
       if (mask.hasExtents()) a = mask.litBegin[j], b = mask.litEnd[j];
       const uint8_t* row = mask.pixels.data() + static_cast<std::size_t>(j) * mask.width;
-      uint8_t* out = image.pixels.data() + static_cast<std::size_t>(j / factor) * image.width;
-      for (uint32_t i = a; i < b; ++i)
-        if (row[i]) out[i / factor] = 255;
+      if (!grid.transposed) {
+        uint8_t* out = image.pixels.data() + static_cast<std::size_t>(j / factor) * image.width;
+        for (uint32_t i = a; i < b; ++i)
+          if (row[i]) out[i / factor] = 255;
+        continue;
+      }
+      const uint32_t x = grid.mirrorY ? mask.height - 1 - j : j;  // the plate's pixel column
+      for (uint32_t i = a; i < b; ++i) {
+        if (!row[i]) continue;
+        const uint32_t y = grid.mirrorX ? mask.width - 1 - i : i;  // the plate's pixel row
+        image.pixels[static_cast<std::size_t>(y / factor) * image.width + x / factor] = 255;
+      }
     }
   }
   void merge(const Picture& other) {
@@ -199,6 +210,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     o.mirrorY = job.mirrorY.value_or(false);
     o.antialias = job.antialias;
     const std::filesystem::path out = plateOutputPath(job.masks, plate);
+    o.output = out;  // the format decides whether a portrait printer's orientation applies
     std::string name = out.stem().string();
     ProfileChoice choice;  // the printer preset and material: exposure settings for the printer files
     choice.printer = job.printer;
@@ -271,7 +283,8 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
       return;
     }
     r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster);
-    if (!job.picture.empty() && (k % pictureEvery == 0 || k + 1 == planes.size())) s.picture.add(s.mask);
+    if (!job.picture.empty() && (k % pictureEvery == 0 || k + 1 == planes.size()))
+      s.picture.add(s.mask, maskJob.grid);
     maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours>, std::size_t slot, uint32_t position) {

@@ -157,8 +157,14 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
                          ? "masks need a positive pixel size: give --pixel MM"
                          : "printer '" + print.printerName +
                                "' has no fixed pixel size: give --pixel MM (the display's pixel pitch)");
-  job.grid = placeGrid(extent, width, height, pixel, o.origin, o.mirrorX || print.mirrorX,
-                       o.mirrorY || print.mirrorY);
+  // EXR and VDB stacks are volumes in the model's frame, GOO and NanoDLP files landscape images: a
+  // preset's portrait display (sl1, sl1s) and its mirroring, which belongs to it, do not apply to them.
+  const std::string ext = lowerExtension(o.output);
+  const bool landscapeOnly = ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
+  const bool portrait = print.orientation == "portrait" && !landscapeOnly;
+  const bool printerMirrors = print.orientation != "portrait" || portrait;
+  job.grid = placeGrid(extent, width, height, pixel, o.origin, o.mirrorX || (printerMirrors && print.mirrorX),
+                       o.mirrorY || (printerMirrors && print.mirrorY));
   const double overhang = gridOverhang(extent, job.grid);
   if (overhang > 0 && !o.crop) {
     // Which edges the model crosses, and by how much, in the model's coordinates.
@@ -187,6 +193,26 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
         extent.min.x, extent.max.x, extent.min.y, extent.max.y, width, height, pixel, job.grid.x0, x1,
         job.grid.y0, y1, where.c_str());
     throw InputError(text);
+  }
+  const auto orientationSetBy = print.origin.find("display_orientation");
+  if (print.orientation == "portrait" && landscapeOnly && orientationSetBy != print.origin.end() &&
+      !orientationSetBy->second.starts_with("printer "))
+    throw InputError(o.output.string() + ": display_orientation portrait (" + orientationSetBy->second +
+                     ") applies to SL1 archives and PNG folders only; " + ext +
+                     " stacks are written landscape");
+  if (portrait) {
+    // PrusaSlicer's portrait images (checked pixel for pixel against its SL1s, bench/prusa_compare.sh
+    // TOPO_PORTRAIT=1): with display_mirror_x = mx and display_mirror_y = my, the grid that runs along
+    // the model's y across and its x up, mirrored by (!mx, my). The SL1's own setting (1, 0) is that grid
+    // unmirrored.
+    const PixelGrid bed = job.grid;
+    job.grid.x0 = bed.y0;
+    job.grid.y0 = bed.x0;
+    job.grid.width = bed.height;
+    job.grid.height = bed.width;
+    job.grid.mirrorX = !bed.mirrorX;
+    job.grid.mirrorY = bed.mirrorY;
+    job.grid.transposed = true;
   }
   job.layerCount = static_cast<uint32_t>(planes.size());
   job.antiAliased = o.antialias || (print.gammaCorrection && *print.gammaCorrection > 0);

@@ -7,8 +7,8 @@ namespace toposlice {
 namespace {
 
 constexpr PrinterPreset kPresets[] = {
-    {"sl1", 2560, 1440, 0.04725, "SL1", 150.0},
-    {"sl1s", 2560, 1620, 0.05, "SL1S", 150.0},
+    {"sl1", 2560, 1440, 0.04725, "SL1", 150.0, true},
+    {"sl1s", 2560, 1620, 0.05, "SL1S", 150.0, true},
     {"generic-4k", 3840, 2160, 0.0, "SL1", 0.0},
     {"generic-8k", 7680, 4320, 0.043, "SL1", 300.0},
 };

@@ -15,6 +15,9 @@ struct PrinterPreset {
   double pixel;            // mm; 0 = the user must give --pixel
   const char* model;       // SL1 printerModel written into archives
   double buildHeight = 0;  // mm of z travel; 0: unknown (not checked)
+  // Portrait display (PrusaSlicer's display_orientation = portrait, display_mirror_x = 1): the SL1 and
+  // SL1S firmware shows only images as tall as the display's long side (1440 x 2560, 1620 x 2560).
+  bool portrait = false;
 };
 
 // "sl1" (Prusa SL1: 2560x1440 at 0.04725 mm), "sl1s" (SL1S: 2560x1620 at 0.05 mm),

@@ -16,6 +16,9 @@ struct PixelGrid {
   double pixel = 0.05;    // pixel edge length, mm
   uint32_t width = 0, height = 0;
   bool mirrorX = false, mirrorY = false;  // applied by the rasterizer: pixel i becomes width-1-i, etc.
+  // Portrait images: the grid's x runs along the model's y and its y along the model's x (x0 is then a
+  // y and y0 an x); the rasterizer swaps every point's coordinates, which also reverses each loop.
+  bool transposed = false;
 };
 
 struct MaskImage {

@@ -59,6 +59,11 @@ void forEachClosedFiniteLoop(std::span<const ContourSet> sets, F&& f) {
   }
 }
 
+// A model point in the grid's axes (PixelGrid::transposed: x and y swapped).
+Point2d gridPoint(Point2d p, bool transposed) {
+  return transposed ? Point2d{p.y, p.x} : p;
+}
+
 // Groups `edges` by first(edge) < count, keeping their order inside a group (a counting sort):
 // bucketed[start[k], start[k + 1]) are the edges whose first is k.
 template <class Edge, class First>
@@ -76,14 +81,14 @@ void bucketByFirst(const std::vector<Edge>& edges, uint32_t count, First first, 
 // Collects the edges of all closed, finite loops that cross at least one of `count` sample lines
 // origin + (k + 1/2) pitch, then groups them by first line into scratch.bucketed / bucketStart.
 void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitch, uint32_t count,
-                    RasterScratch& scratch) {
+                    bool transposed, RasterScratch& scratch) {
   std::vector<RasterEdge>& edges = scratch.edges;
   edges.clear();
   forEachClosedFiniteLoop(sets, [&](std::span<const Point2d> loop, int32_t sign) {
     const std::size_t n = loop.size();
     for (std::size_t i = 0; i < n; ++i) {
-      const Point2d a = loop[i];
-      const Point2d b = loop[i + 1 == n ? 0 : i + 1];
+      const Point2d a = gridPoint(loop[i], transposed);
+      const Point2d b = gridPoint(loop[i + 1 == n ? 0 : i + 1], transposed);
       if (a.y == b.y) continue;  // horizontal: crosses no sample line under the half-open rule
       const bool upward = a.y < b.y;
       const Point2d lo = upward ? a : b;
@@ -94,7 +99,7 @@ void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitc
       double slope = (hi.x - lo.x) / (hi.y - lo.y);
       if (!std::isfinite(slope)) slope = 0.0;  // dy is so small that any x of the edge is as good
       // A CCW outer loop runs downwards on its left side: crossing it left to right enters the solid.
-      const int32_t winding = upward ? -sign : sign;
+      const int32_t winding = (upward ? -sign : sign) * (transposed ? -1 : 1);  // a swap reverses loops
       edges.push_back(RasterEdge{0.0, lo.x, lo.y, slope, first, end, winding});
     }
   });
@@ -203,8 +208,8 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
     std::vector<int32_t>& ids = scratch.loopIds;
     ids.assign(n, -1);
     for (std::size_t i = 0; i < n; ++i) {
-      const Point2d a = loop[i];
-      const Point2d b = loop[i + 1 == n ? 0 : i + 1];
+      const Point2d a = gridPoint(loop[i], grid.transposed);
+      const Point2d b = gridPoint(loop[i + 1 == n ? 0 : i + 1], grid.transposed);
       const double av = (a.y - grid.y0) * inv, bv = (b.y - grid.y0) * inv;
       if (av == bv) continue;  // horizontal: encloses no area of its own
       const bool upward = av < bv;
@@ -217,7 +222,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       const uint32_t first = v0 <= 0.0 ? 0 : static_cast<uint32_t>(v0);
       const uint32_t end = v1 >= top ? height : static_cast<uint32_t>(std::ceil(v1));
       if (first >= end) continue;
-      const int32_t winding = upward ? -sign : sign;
+      const int32_t winding = (upward ? -sign : sign) * (grid.transposed ? -1 : 1);  // a swap reverses loops
       ids[i] = static_cast<int32_t>(edges.size());
       edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
                                    static_cast<uint32_t>(edges.size()), -1});
@@ -227,7 +232,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
     for (std::size_t i = 0; i < n; ++i) {
       if (ids[i] < 0) continue;
       CoverageEdge& e = edges[static_cast<std::size_t>(ids[i])];
-      const bool upward = e.winding == -sign;
+      const bool upward = e.winding == -sign * (grid.transposed ? -1 : 1);
       const int32_t other = ids[upward ? (i + 1 == n ? 0 : i + 1) : (i == 0 ? n - 1 : i - 1)];
       if (other >= 0 && edges[static_cast<std::size_t>(other)].winding == e.winding) e.above = other;
     }
@@ -574,7 +579,7 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
   prepareImage(grid, out);  // with known extents only the previous image's lit spans are cleared
   if (width == 0 || height == 0 || !usableGrid(grid)) return;
 
-  buildEdgeTable(sets, grid.y0, grid.pixel, height, scratch);
+  buildEdgeTable(sets, grid.y0, grid.pixel, height, grid.transposed, scratch);
   for (uint32_t j = 0; j < height; ++j) {
     if (!hasWork(j, scratch)) continue;
     const uint32_t r = grid.mirrorY ? height - 1 - j : j;

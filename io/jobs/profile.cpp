@@ -72,9 +72,12 @@ const SettingKey kKeys[] = {
     {"display_pixels_y", P, "display height in pixels", false},
     {"display_width", P, "display width in mm (pixel size = display_width / display_pixels_x)", false},
     {"display_height", P, "display height in mm (must give the same, square, pixel size)", false},
-    {"display_orientation", P, "landscape (portrait is not written yet: an error)", false},
-    {"display_mirror_x", P, "mirror the images in x (0 or 1)", false},
-    {"display_mirror_y", P, "mirror the images in y (0 or 1)", false},
+    {"display_orientation", P,
+     "landscape, or portrait: images display_pixels_y wide and display_pixels_x tall, as PrusaSlicer writes "
+     "them",
+     false},
+    {"display_mirror_x", P, "mirror the images in x (0 or 1; in portrait, as PrusaSlicer means it)", false},
+    {"display_mirror_y", P, "mirror the images in y (0 or 1; in portrait, as PrusaSlicer means it)", false},
     {"max_print_height", P, "mm; a model taller than this (after corrections) is refused; 0: no limit",
      false},
     {"relative_correction_x", P, "printer scaling correction in x (factor)", false},
@@ -194,6 +197,10 @@ std::vector<std::pair<std::string, std::string>> printerPreset(const PrinterPres
     a.emplace_back("display_width", formatNumber(std::round(p.width * p.pixel * 1e6) / 1e6));
     a.emplace_back("display_height", formatNumber(std::round(p.height * p.pixel * 1e6) / 1e6));
     a.emplace_back("max_print_height", "150");
+  }
+  if (p.portrait) {
+    a.emplace_back("display_orientation", "portrait");
+    a.emplace_back("display_mirror_x", "1");
   }
   return a;
 }
@@ -380,9 +387,6 @@ PrintSettings resolvePrintSettings(const ProfileChoice& choice) {
   settings.materialName = material;
   for (const auto& [key, value] : choice.overrides)
     assignSetting(settings, key, value, choice.overrideOrigin);
-  if (settings.orientation != "landscape")
-    throw InputError("display_orientation '" + settings.orientation +
-                     "': toposlice writes landscape images only (portrait is not supported yet)");
   return settings;
 }
 

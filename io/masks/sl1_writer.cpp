@@ -157,8 +157,12 @@ std::string sl1PrusaSlicerIni(const MaskJob& job, uint32_t layers) {
   // Display sizes are products (pixels x pitch): rounded to a nanometre, so 2560 x 0.04725 prints as the
   // 120.96 a user reads on the printer, not 120.96000000000001.
   const auto nanometres = [](double mm) { return std::round(mm * 1e6) / 1e6; };
-  const double width = nanometres(job.grid.width * job.grid.pixel),
-               height = nanometres(job.grid.height * job.grid.pixel);
+  // The display in PrusaSlicer's terms: a portrait grid (PixelGrid::transposed) is the display's
+  // pixels_y wide and pixels_x tall, mirrored by (!display_mirror_x, display_mirror_y).
+  const bool portrait = job.grid.transposed;
+  const uint32_t pixelsX = portrait ? job.grid.height : job.grid.width,
+                 pixelsY = portrait ? job.grid.width : job.grid.height;
+  const double width = nanometres(pixelsX * job.grid.pixel), height = nanometres(pixelsY * job.grid.pixel);
   const double printHeight = std::max(150.0, std::ceil(layers * job.layerHeight));
   IniMap m;
   m["absolute_correction"] = "0";
@@ -166,11 +170,11 @@ std::string sl1PrusaSlicerIni(const MaskJob& job, uint32_t layers) {
   m["bed_shape"] =
       "0x0," + number(width) + "x0," + number(width) + "x" + number(height) + ",0x" + number(height);
   m["display_height"] = number(height);
-  m["display_mirror_x"] = job.grid.mirrorX ? "1" : "0";
+  m["display_mirror_x"] = job.grid.mirrorX != portrait ? "1" : "0";
   m["display_mirror_y"] = job.grid.mirrorY ? "1" : "0";
-  m["display_orientation"] = "landscape";
-  m["display_pixels_x"] = number(uint64_t{job.grid.width});
-  m["display_pixels_y"] = number(uint64_t{job.grid.height});
+  m["display_orientation"] = portrait ? "portrait" : "landscape";
+  m["display_pixels_x"] = number(uint64_t{pixelsX});
+  m["display_pixels_y"] = number(uint64_t{pixelsY});
   m["display_width"] = number(width);
   m["elefant_foot_compensation"] = "0";
   m["exposure_time"] = number(job.exposureTime);
