@@ -527,6 +527,23 @@ void RunAdler32::add(uint8_t value, uint64_t count) {
   if (b_ >= (uint64_t{1} << 61)) b_ %= kAdlerModulus;
 }
 
+void RunAdler32::addRun(uint8_t first, uint8_t rest, uint64_t count) {
+  constexpr uint64_t kPiece = uint64_t{1} << 23;
+  if (count > kPiece) {  // the lazy reduction's bounds hold for runs shorter than 2^24
+    add(first, 1);
+    add(rest, count - 1);
+    return;
+  }
+  // A += first, B += A; then count - 1 bytes of rest (as add), with one reduction check.
+  a_ += first;
+  b_ += a_;
+  const uint64_t m = count - 1;
+  b_ += m * a_ + rest * (m * (m + 1) / 2);
+  a_ += rest * m;
+  if (a_ >= (uint64_t{1} << 32)) a_ %= kAdlerModulus;
+  if (b_ >= (uint64_t{1} << 61)) b_ %= kAdlerModulus;
+}
+
 uint32_t RunAdler32::value() const {
   return static_cast<uint32_t>((b_ % kAdlerModulus) << 16 | (a_ % kAdlerModulus));
 }

@@ -79,6 +79,8 @@ class RunDeflater {
 class RunAdler32 {
  public:
   void add(uint8_t value, uint64_t count);
+  // One byte `first`, then count - 1 bytes of `rest` (count >= 1): the delta bytes of one run.
+  void addRun(uint8_t first, uint8_t rest, uint64_t count);
   uint32_t value() const;
 
  private:

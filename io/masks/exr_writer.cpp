@@ -66,15 +66,6 @@ void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& 
   if (end < width) runs.push_back(static_cast<uint32_t>(width - end));
 }
 
-bool sameRows(const MaskImage& mask, size_t a, size_t b) {
-  const size_t width = mask.width;
-  if (!mask.hasExtents()) return std::memcmp(&mask.pixels[a * width], &mask.pixels[b * width], width) == 0;
-  const size_t begin = mask.litBegin[a], end = mask.litEnd[a];
-  if (begin >= end) return mask.litBegin[b] >= mask.litEnd[b];
-  return begin == mask.litBegin[b] && end == mask.litEnd[b] &&
-         std::memcmp(&mask.pixels[a * width + begin], &mask.pixels[b * width + begin], end - begin) == 0;
-}
-
 // OpenEXR's ZIP chunk of file rows [y0, y0 + lines) (file row y is stored row height-1-y): the raw
 // block is the rows' halves, little-endian; its bytes are split (even bytes, the low bytes of all
 // pixels, first; then the odd, high bytes), each byte but the first replaced by (byte - previous byte
@@ -92,7 +83,11 @@ uint32_t tokenizeZipChunk(const MaskImage& mask, uint32_t y0, uint32_t lines, bo
     const size_t stored = height - 1 - (y0 + i);
     lineStart[i] = runs.size();
     appendRowRuns(mask, stored, runs);
-    sameAsAbove[i] = i > 0 && sameRows(mask, stored, stored + 1);
+    // Runs are maximal, so two lines are equal exactly when their run lists are.
+    sameAsAbove[i] =
+        i > 0 && std::equal(runs.begin() + static_cast<std::ptrdiff_t>(lineStart[i - 1]),
+                            runs.begin() + static_cast<std::ptrdiff_t>(lineStart[i]),
+                            runs.begin() + static_cast<std::ptrdiff_t>(lineStart[i]), runs.end());
   }
   lineStart[lines] = runs.size();
 
@@ -128,8 +123,7 @@ uint32_t tokenizeZipChunk(const MaskImage& mask, uint32_t y0, uint32_t lines, bo
         const uint32_t length = line[k] & 0xFFFFFF;
         const auto delta = static_cast<uint8_t>(previous < 0 ? raw : (raw - previous + 128) & 0xFF);
         previous = raw;
-        adler.add(delta, 1);
-        if (length > 1) adler.add(128, length - 1);
+        adler.addRun(delta, 128, length);
         lastDelta = length > 1 ? 128 : delta;
         if (!copy) {
           deflater.putBytes(delta, 1);
