@@ -161,10 +161,10 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   // preset's portrait display (sl1, sl1s) and its mirroring, which belongs to it, do not apply to them.
   const std::string ext = lowerExtension(o.output);
   const bool landscapeOnly = ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
-  const bool portrait = print.orientation == "portrait" && !landscapeOnly;
-  const bool printerMirrors = print.orientation != "portrait" || portrait;
-  job.grid = placeGrid(extent, width, height, pixel, o.origin, o.mirrorX || (printerMirrors && print.mirrorX),
-                       o.mirrorY || (printerMirrors && print.mirrorY));
+  const bool portraitIgnored = print.orientation == "portrait" && landscapeOnly;
+  job.grid =
+      placeGrid(extent, width, height, pixel, o.origin, o.mirrorX || (!portraitIgnored && print.mirrorX),
+                o.mirrorY || (!portraitIgnored && print.mirrorY));
   const double overhang = gridOverhang(extent, job.grid);
   if (overhang > 0 && !o.crop) {
     // Which edges the model crosses, and by how much, in the model's coordinates.
@@ -195,12 +195,12 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
     throw InputError(text);
   }
   const auto orientationSetBy = print.origin.find("display_orientation");
-  if (print.orientation == "portrait" && landscapeOnly && orientationSetBy != print.origin.end() &&
+  if (portraitIgnored && orientationSetBy != print.origin.end() &&
       !orientationSetBy->second.starts_with("printer "))
     throw InputError(o.output.string() + ": display_orientation portrait (" + orientationSetBy->second +
                      ") applies to SL1 archives and PNG folders only; " + ext +
                      " stacks are written landscape");
-  if (portrait) {
+  if (print.orientation == "portrait" && !portraitIgnored) {
     // PrusaSlicer's portrait images (checked pixel for pixel against its SL1s, bench/prusa_compare.sh
     // TOPO_PORTRAIT=1): with display_mirror_x = mx and display_mirror_y = my, the grid that runs along
     // the model's y across and its x up, mirrored by (!mx, my). The SL1's own setting (1, 0) is that grid
@@ -675,13 +675,15 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       for (std::size_t i = 0; i < sliced.size(); ++i)
         s.sets.push_back({&sliced[i], i == 0 || i <= addCount ? 1 : -1});
       // A correction that only grows, binary masks: the masks rasterize the raw offset loops, whose
-      // positive-winding region is the corrected one (polygon_offset.h), so the union is made only when
-      // contour outputs or the report need the polygons. Masks are the same either way. (The exact
-      // coverage rasterizer cuts a row at every crossing, and raw loops cross at every concave vertex:
-      // anti-aliased masks are faster from the polygons.)
+      // positive-winding region is the corrected one (polygon_offset.h), and the polygons, when contour
+      // outputs or the report need them, are those loops united (correctLayer's result, exactly). (The
+      // exact-coverage rasterizer cuts a row at every crossing, and raw loops cross at every concave
+      // vertex: anti-aliased masks are faster from the polygons.)
       r.raw = masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, sliced[0].z, r.rawLoops);
-      if (!r.raw || polygonsNeeded)
+      if (!r.raw)
         correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
+      else if (polygonsNeeded)
+        unitePositive(r.rawLoops, sliced[0].z, r.corrected[0]);
       else
         r.corrected[0].clear(sliced[0].z);
       for (std::size_t i = 1; i < sliced.size(); ++i) r.corrected[i].clear(sliced[i].z);
@@ -703,7 +705,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       return;
     }
     s.sets.clear();
-    if (correcting && r.raw)
+    if (r.raw)
       s.sets.push_back({&r.rawLoops, 1});
     else
       for (std::size_t i = 0; i < layer.size(); ++i)

@@ -45,16 +45,18 @@ bool allFinite(std::span<const Point2d> loop) {
 }
 
 // Calls f(loop, sign) for every closed loop with finite points of every set (open polylines and loops
-// with a NaN or infinity enclose nothing).
+// with a NaN or infinity enclose nothing). On a transposed grid (x and y swapped, see gridPoint) every
+// loop runs the other way round: the sign given is then the set's negated, so that the loop's points,
+// swapped, and this sign give the set's region.
 template <class F>
-void forEachClosedFiniteLoop(std::span<const ContourSet> sets, F&& f) {
+void forEachClosedFiniteLoop(std::span<const ContourSet> sets, bool transposed, F&& f) {
   for (const ContourSet& set : sets) {
     assert(set.layer != nullptr && (set.sign == 1 || set.sign == -1));
     const LayerContours& layer = *set.layer;
     for (std::size_t l = 0; l < layer.loopCount(); ++l) {
       if (layer.loopClosed[l] == 0) continue;
       const std::span<const Point2d> loop = layer.loopPoints(l);
-      if (allFinite(loop)) f(loop, set.sign);
+      if (allFinite(loop)) f(loop, transposed ? -set.sign : set.sign);
     }
   }
 }
@@ -84,7 +86,7 @@ void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitc
                     bool transposed, RasterScratch& scratch) {
   std::vector<RasterEdge>& edges = scratch.edges;
   edges.clear();
-  forEachClosedFiniteLoop(sets, [&](std::span<const Point2d> loop, int32_t sign) {
+  forEachClosedFiniteLoop(sets, transposed, [&](std::span<const Point2d> loop, int32_t sign) {
     const std::size_t n = loop.size();
     for (std::size_t i = 0; i < n; ++i) {
       const Point2d a = gridPoint(loop[i], transposed);
@@ -99,7 +101,7 @@ void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitc
       double slope = (hi.x - lo.x) / (hi.y - lo.y);
       if (!std::isfinite(slope)) slope = 0.0;  // dy is so small that any x of the edge is as good
       // A CCW outer loop runs downwards on its left side: crossing it left to right enters the solid.
-      const int32_t winding = (upward ? -sign : sign) * (transposed ? -1 : 1);  // a swap reverses loops
+      const int32_t winding = upward ? -sign : sign;
       edges.push_back(RasterEdge{0.0, lo.x, lo.y, slope, first, end, winding});
     }
   });
@@ -203,7 +205,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
   const uint32_t height = grid.height;
   const double inv = 1.0 / grid.pixel;
   const double top = static_cast<double>(height);
-  forEachClosedFiniteLoop(sets, [&](std::span<const Point2d> loop, int32_t sign) {
+  forEachClosedFiniteLoop(sets, grid.transposed, [&](std::span<const Point2d> loop, int32_t sign) {
     const std::size_t n = loop.size();
     std::vector<int32_t>& ids = scratch.loopIds;
     ids.assign(n, -1);
@@ -222,7 +224,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       const uint32_t first = v0 <= 0.0 ? 0 : static_cast<uint32_t>(v0);
       const uint32_t end = v1 >= top ? height : static_cast<uint32_t>(std::ceil(v1));
       if (first >= end) continue;
-      const int32_t winding = (upward ? -sign : sign) * (grid.transposed ? -1 : 1);  // a swap reverses loops
+      const int32_t winding = upward ? -sign : sign;
       ids[i] = static_cast<int32_t>(edges.size());
       edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
                                    static_cast<uint32_t>(edges.size()), -1});
@@ -232,7 +234,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
     for (std::size_t i = 0; i < n; ++i) {
       if (ids[i] < 0) continue;
       CoverageEdge& e = edges[static_cast<std::size_t>(ids[i])];
-      const bool upward = e.winding == -sign * (grid.transposed ? -1 : 1);
+      const bool upward = e.winding == -sign;
       const int32_t other = ids[upward ? (i + 1 == n ? 0 : i + 1) : (i == 0 ? n - 1 : i - 1)];
       if (other >= 0 && edges[static_cast<std::size_t>(other)].winding == e.winding) e.above = other;
     }
