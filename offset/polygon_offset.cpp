@@ -112,13 +112,11 @@ class RawOffset {
     for (std::size_t i = 1; i < last; ++i) {
       if (path[i] == clean.back()) continue;
       clean.push_back(path[i]);
-      const IntPoint& p = path[i];
-      if (p.Y > clean[lowest].Y || (p.Y == clean[lowest].Y && p.X < clean[lowest].X))
-        lowest = clean.size() - 1;
+      if (lower(path[i], clean[lowest])) lowest = clean.size() - 1;
     }
     if (clean.size() < 3) return;
     const IntPoint p = clean[lowest];
-    if (!hasLowest_ || p.Y > lowestPoint_.Y || (p.Y == lowestPoint_.Y && p.X < lowestPoint_.X)) {
+    if (!hasLowest_ || lower(p, lowestPoint_)) {
       hasLowest_ = true;
       lowestPoint_ = p;
       lowestPath_ = paths_.size();
@@ -155,6 +153,9 @@ class RawOffset {
     dy *= f;
     return {dy, -dx};
   }
+
+  // Clipper's order for the lowest point: larger y, then smaller x.
+  static bool lower(const IntPoint& a, const IntPoint& b) { return a.Y > b.Y || (a.Y == b.Y && a.X < b.X); }
 
   static cInt round(double v) { return v < 0 ? static_cast<cInt>(v - 0.5) : static_cast<cInt>(v + 0.5); }
 

@@ -402,11 +402,15 @@ RunDeflater::RunDeflater(DeflateScratch& scratch, uint32_t copyDistance)
 
 RunDeflater::~RunDeflater() = default;
 
-void RunDeflater::push(uint32_t token) {
-  assert(token < kTokenKinds && !plan_);
+void RunDeflater::append(uint32_t token) {
   if (size_ == tokens_.size()) [[unlikely]]
     tokens_.resize(std::max<size_t>(4096, 2 * size_));
   tokens_[size_++] = static_cast<uint16_t>(token);
+}
+
+void RunDeflater::push(uint32_t token) {
+  assert(token < kTokenKinds && !plan_);
+  append(token);
   ++counts_[token];
   ++expanded_;
 }
@@ -420,9 +424,7 @@ void RunDeflater::pushLongest(uint64_t q, uint32_t kind) {
     if (take == 1) {
       push(longest);
     } else {
-      if (size_ == tokens_.size()) [[unlikely]]
-        tokens_.resize(std::max<size_t>(4096, 2 * size_));
-      tokens_[size_++] = static_cast<uint16_t>(repeat + take - 1);
+      append(repeat + take - 1);
       counts_[longest] += take;
       expanded_ += take;
     }

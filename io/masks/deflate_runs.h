@@ -56,6 +56,7 @@ class RunDeflater {
 
  private:
   struct Plan;
+  void append(uint32_t token);  // into the buffer, grown as needed; counts are the caller's
   void push(uint32_t token);
   void flush();
   void putMatches(uint64_t n, uint32_t kind);

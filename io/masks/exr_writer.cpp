@@ -101,12 +101,9 @@ uint32_t tokenizeZipChunk(const MaskImage& mask, uint32_t y0, uint32_t lines, bo
       const uint64_t size = uint64_t{width} * lines;
       const auto delta = static_cast<uint8_t>(previous < 0 ? planeRaw : (planeRaw - previous + 128) & 0xFF);
       previous = planeRaw;
-      adler.add(delta, 1);
+      adler.addRun(delta, 128, size);
       deflater.putBytes(delta, 1);
-      if (size > 1) {
-        adler.add(128, size - 1);
-        deflater.putBytes(128, size - 1);
-      }
+      if (size > 1) deflater.putBytes(128, size - 1);
       continue;
     }
     for (uint32_t i = 0; i < lines; ++i) {
