@@ -33,6 +33,7 @@
 #include "core/mesh/weld.h"
 #include "io/contours/xml_text.h"
 #include "io/errors.h"
+#include "io/masks/zip_stream.h"
 #include "io/output_file.h"
 #include "io/text_buffer.h"
 
@@ -228,7 +229,7 @@ class ThreeMfWriter final : public ContourSink {
     }
     // minizip writes the temporary through its own handle (it seeks back to complete each local
     // header); file_ owns the name, its removal when abandoned (signals included) and the final rename.
-    zip_.reset(zipOpen64(file_.tempPath().c_str(), APPEND_STATUS_CREATE));
+    zip_.reset(openZipOnTemporary(file_.tempPath()));
     if (zip_ == nullptr) {
       throw OutputError(path.string() + ": cannot create " + file_.tempPath().string() + ": " +
                         std::generic_category().message(errno));

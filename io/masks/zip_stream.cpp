@@ -2,6 +2,7 @@
 #include "io/masks/zip_stream.h"
 
 #include <cerrno>
+#include <cstdio>
 #include <system_error>
 
 #include <fcntl.h>
@@ -82,10 +83,21 @@ std::string errorText(int code) {
   return code == ZIP_ERRNO ? std::generic_category().message(errno) : "zip error " + std::to_string(code);
 }
 
+voidpf ZCALLBACK openWithoutTruncating(voidpf, const void* filename, int) {
+  return std::fopen(static_cast<const char*>(filename), "r+b");
+}
+
 }  // namespace
 
+void* openZipOnTemporary(const std::filesystem::path& temp) {
+  zlib_filefunc64_def functions;
+  fill_fopen64_filefunc(&functions);
+  functions.zopen64_file = openWithoutTruncating;
+  return zipOpen2_64(temp.c_str(), APPEND_STATUS_CREATE, nullptr, &functions);
+}
+
 ZipStream::ZipStream(OutputFile& file, std::time_t created) : file_(file) {
-  zip_ = zipOpen64(file_.tempPath().c_str(), APPEND_STATUS_CREATE);
+  zip_ = openZipOnTemporary(file_.tempPath());
   if (zip_ == nullptr) {
     throw OutputError(file_.finalPath().string() + ": cannot create " + file_.tempPath().string() + ": " +
                       std::generic_category().message(errno));
