@@ -385,6 +385,36 @@ TEST_F(CliToolDeterminism, AntiAliasedSl1IsByteIdenticalForEveryThreadCountAndBa
   expectNoTemporaries();
 }
 
+// A .vdb carries a UUID in its header; ours is derived from the content, so the file is the same bytes for
+// every thread count and band size, and another content gets another UUID.
+TEST_F(CliToolDeterminism, VdbIsByteIdenticalForEveryThreadCountAndBandSize) {
+  std::map<std::string, std::string> reference;
+  for (const std::vector<std::string>& extra : {std::vector<std::string>{"--threads", "1"},
+                                                {"--threads", "2"},
+                                                {"--threads", "8"},
+                                                {"--band-layers", "7"}}) {
+    for (const std::string kind : {"single", "slabs"}) {
+      const std::string tag = "v" + kind + extra[0].substr(2, 1) + extra[1];
+      std::vector<std::string> args{
+          "slice", examplePart().string(), "-H", "0.05", "--masks", tag + ".vdb", "--printer", "sl1", "-q"};
+      if (kind == "slabs") args.insert(args.end(), {"--vdb-layout", "slabs", "--antialias"});
+      args.insert(args.end(), extra.begin(), extra.end());
+      const RunResult a = run(args);
+      ASSERT_EQ(a.code(), 0) << tag << ": " << a.describe();
+      const std::string vdb = readBytes(path(tag + ".vdb"));
+      ASSERT_GT(vdb.size(), 57u) << tag;
+      if (!reference.contains(kind)) {
+        reference[kind] = vdb;
+        continue;
+      }
+      EXPECT_TRUE(vdb == reference[kind]) << tag << ": VDB differs from --threads 1";
+    }
+  }
+  // Binary single grid and anti-aliased slabs: different contents, different UUIDs (bytes 21 to 56).
+  EXPECT_NE(reference["single"].substr(21, 36), reference["slabs"].substr(21, 36));
+  expectNoTemporaries();
+}
+
 // The layer PNGs of an SL1 archive, by entry name.
 std::map<std::string, std::vector<uint8_t>> sl1Layers(const fs::path& file) {
   std::map<std::string, std::vector<uint8_t>> layers;

@@ -6,10 +6,12 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <exception>
 #include <fstream>
 #include <optional>
+#include <string>
 #include <type_traits>
 
 #pragma GCC diagnostic push
@@ -21,6 +23,7 @@
 #include <openvdb/io/GridDescriptor.h>
 #include <openvdb/io/io.h>
 #include <openvdb/openvdb.h>
+#include <zlib.h>
 #pragma GCC diagnostic pop
 
 #include "io/errors.h"
@@ -31,19 +34,66 @@ namespace {
 
 constexpr uint32_t kBandLayers = 8;  // leaf node depth
 
+// The file's UUID from its content: every layer's encoded blocks (their CRC-32 and size, in layer order)
+// folded into two 64-bit lanes, written as a UUID of version 8 (RFC 9562: custom). The same job gives
+// the same UUID and the same bytes; another content, another UUID (unless its layers' checksums collide).
+class ContentId {
+ public:
+  void add(uint32_t crc, uint64_t size) {
+    const uint64_t word = uint64_t{crc} << 32 ^ size;
+    a_ = mix(a_ ^ word);
+    b_ = mix(b_ + word + 0x9E3779B97F4A7C15ull);
+  }
+  std::string uuid() const {
+    const uint64_t hi = (a_ & ~0xF000ull) | 0x8000ull;        // version 8
+    const uint64_t lo = (b_ & ~(3ull << 62)) | (2ull << 62);  // variant 10
+    char text[37];
+    std::snprintf(text, sizeof text, "%08x-%04x-%04x-%04x-%012llx", static_cast<unsigned>(hi >> 32),
+                  static_cast<unsigned>(hi >> 16 & 0xFFFF), static_cast<unsigned>(hi & 0xFFFF),
+                  static_cast<unsigned>(lo >> 48), static_cast<unsigned long long>(lo & 0xFFFFFFFFFFFFull));
+    return text;
+  }
+
+ private:
+  static uint64_t mix(uint64_t x) {  // splitmix64's finalizer
+    x ^= x >> 30;
+    x *= 0xBF58476D1CE4E5B9ull;
+    x ^= x >> 27;
+    x *= 0x94D049BB133111EBull;
+    return x ^ (x >> 31);
+  }
+  uint64_t a_ = 0x746F706F736C6963ull, b_ = 0x65766462ull;
+};
+
 // A .vdb file written one grid at a time: the layout of io::File::write (header, file metadata, grid
 // count, then each grid with its descriptor and offsets), built from io::Archive's protected pieces. The
 // grid count is written as 0 and patched by close().
 class SlabArchive : public openvdb::io::Archive {
  public:
+  static constexpr std::streamoff kUuidOffset = 8 + 4 + 2 * 4 + 1;  // magic, versions, offsets flag
+  static constexpr std::streamsize kUuidLength = 36;
+
   SlabArchive(const std::filesystem::path& path, const openvdb::MetaMap& fileMeta) {
-    os_.open(path, std::ios_base::out | std::ios_base::binary | std::ios_base::trunc);
+    // The OutputFile's temporary, created empty: opened without truncation, which on ext4 would write the
+    // whole file back as it is closed (auto_da_alloc; see openZipOnTemporary).
+    os_.open(path, std::ios_base::in | std::ios_base::out | std::ios_base::binary);
     if (!os_) throw openvdb::IoError("could not open " + path.string() + " for writing");
     streamMeta_ = std::make_shared<openvdb::io::StreamMetadata>();
     openvdb::io::setStreamMetadataPtr(os_, streamMeta_, /*transfer=*/false);
     openvdb::io::setDataCompression(os_, compression());
     openvdb::io::setWriteGridStatsMetadata(os_, isGridStatsMetadataEnabled());
     writeHeader(os_, /*seekable=*/true);
+    // io::Archive writes a random UUID into the header (after the magic number, the file and library
+    // versions and the offsets flag); close() replaces it with one derived from the content, so the
+    // same job gives the same bytes. Checked here, so that a different header layout fails loudly.
+    char uuid[kUuidLength];
+    const std::streampos headerEnd = os_.tellp();
+    os_.seekg(kUuidOffset);
+    os_.read(uuid, kUuidLength);
+    if (!os_ || headerEnd != kUuidOffset + kUuidLength || uuid[8] != '-' || uuid[13] != '-' ||
+        uuid[18] != '-' || uuid[23] != '-')
+      throw openvdb::IoError("unexpected VDB header layout: no UUID at byte " + std::to_string(kUuidOffset));
+    os_.seekp(headerEnd);
     fileMeta.writeMeta(os_);
     countPos_ = os_.tellp();
     const int32_t zero = 0;
@@ -58,17 +108,20 @@ class SlabArchive : public openvdb::io::Archive {
     if (!os_) throw openvdb::IoError("write failed");
   }
 
-  void close() {
+  // Patches the grid count and writes `uuid` (36 characters, 8-4-4-4-12) over the random one.
+  void close(const std::string& uuid) {
     const std::streampos end = os_.tellp();
     os_.seekp(countPos_);
     os_.write(reinterpret_cast<const char*>(&count_), sizeof count_);
+    os_.seekp(kUuidOffset);
+    os_.write(uuid.data(), kUuidLength);
     os_.seekp(end);
     os_.close();
     if (!os_) throw openvdb::IoError("write failed");
   }
 
  private:
-  std::ofstream os_;
+  std::fstream os_;
   openvdb::io::StreamMetadata::Ptr streamMeta_;  // must outlive every write to os_
   std::streampos countPos_{};
   int32_t count_ = 0;
@@ -191,6 +244,7 @@ class VdbSink final : public EncodingMaskSink {
         if constexpr (!kIsMask) std::memcpy(out.data() + at + 12, rows, 64);
       }
     }
+    encoded.crc32 = static_cast<uint32_t>(crc32_z(0, out.data(), out.size()));  // for the file's UUID
   }
 
   void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) override {
@@ -199,6 +253,7 @@ class VdbSink final : public EncodingMaskSink {
     if (index != next_) throw OutputError(where + " arrived, expected " + std::to_string(next_));
     if (encoded.size() % kRecordBytes != 0) throw OutputError(where + " does not match the job's image size");
     if (index == 0) zFirst_ = z;
+    content_.add(layer.crc32, encoded.size());
     band_.insert(band_.end(), encoded.begin(), encoded.end());
     bandEnds_[bandLayers_] = band_.size();
     ++bandLayers_;
@@ -210,7 +265,7 @@ class VdbSink final : public EncodingMaskSink {
     if (bandLayers_ > 0) endBand();
     flushGrid();
     try {
-      archive_->close();
+      archive_->close(content_.uuid());
     } catch (const std::exception& e) {
       const int err = errno;
       throw OutputError(file_.finalPath().string() +
@@ -345,6 +400,7 @@ class VdbSink final : public EncodingMaskSink {
   std::array<ValueT, 256> toValue_{};
   typename GridT::Ptr grid_;  // the open grid
   std::optional<SlabArchive> archive_;
+  ContentId content_;
   double zFirst_ = 0;
   uint32_t next_ = 0, bandLayers_ = 0, slabLayers_ = 0;
   size_t slabLeaves_ = 0;
