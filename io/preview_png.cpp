@@ -31,9 +31,10 @@ void encodeRgbPng(const RgbImage& image, std::vector<uint8_t>& out) {
   std::free(png);
 }
 
-std::vector<uint8_t> previewPng(std::span<const Point3f> corners, uint32_t width, uint32_t height) {
+std::vector<uint8_t> previewPng(std::span<const Point3f> corners, uint32_t width, uint32_t height,
+                                const ChunkRunner& runner) {
   RgbImage image;
-  renderPreview(corners, width, height, image);
+  renderPreview(corners, width, height, image, runner);
   std::vector<uint8_t> png;
   encodeRgbPng(image, png);
   return png;

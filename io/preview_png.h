@@ -14,6 +14,7 @@ namespace toposlice {
 void encodeRgbPng(const RgbImage& image, std::vector<uint8_t>& out);
 
 // Renders `corners` at width x height and returns the PNG bytes.
-std::vector<uint8_t> previewPng(std::span<const Point3f> corners, uint32_t width, uint32_t height);
+std::vector<uint8_t> previewPng(std::span<const Point3f> corners, uint32_t width, uint32_t height,
+                                const ChunkRunner& runner = serialChunkRunner());
 
 }  // namespace toposlice

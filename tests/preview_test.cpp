@@ -13,6 +13,7 @@
 
 #include "core/raster/preview.h"
 #include "io/preview_png.h"
+#include "parallel/parallel.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/tool_runner.h"
 
@@ -134,6 +135,25 @@ TEST(Preview, SphereIsRoundAndLitFromTheUpperLeft) {
   EXPECT_GT(dx / dn, centreX);
   EXPECT_GT(dy / dn, centreY);
   EXPECT_NEAR(worst, 0.25, 0.03);  // ambient only where the light does not reach
+}
+
+TEST(Preview, PiecesGiveTheSerialPicture) {
+  // Two interpenetrating spheres of 262,144 facets each: eight pieces of the facets, drawn one by one in
+  // reverse order or on the thread pool, merge into the serial picture byte for byte.
+  FacetSoup soup = fixtures::sphere(10, 512, 256);
+  const FacetSoup second = fixtures::sphere(7, 512, 256);
+  for (Point3f c : second.corners) soup.corners.push_back({c.x + 9.0f, c.y - 4.0f, c.z + 3.0f});
+  const ChunkRunner reversed{[](std::size_t count, std::size_t, const ChunkBody& body) {
+                               for (std::size_t c = count; c > 0; --c) body(c - 1, c);
+                             },
+                             8};
+  RgbImage serial, pieces, pooled;
+  renderPreview(soup.corners, 800, 480, serial);
+  renderPreview(soup.corners, 800, 480, pieces, reversed);
+  renderPreview(soup.corners, 800, 480, pooled, parallelChunkRunner());
+  EXPECT_EQ(pieces.rgb, serial.rgb);
+  EXPECT_EQ(pooled.rgb, serial.rgb);
+  EXPECT_GT(modelExtent(serial).count, 800u * 480 / 10);
 }
 
 TEST(Preview, EmptyMeshIsBackgroundAndPngDecodesToThePixels) {

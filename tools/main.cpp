@@ -308,7 +308,7 @@ int runPreview(const std::string& model, const MeshReadOptions& read, const std:
   checkNotAnInput(output, {model});
   OutputTransaction transaction;
   const FacetSoup soup = readMesh(model, read);
-  const std::vector<uint8_t> png = previewPng(soup.corners, width, height);
+  const std::vector<uint8_t> png = previewPng(soup.corners, width, height, parallelChunkRunner());
   OutputFile file(output, force);
   file.write(png.data(), png.size());
   file.commit();

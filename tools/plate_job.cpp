@@ -234,6 +234,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
       for (std::size_t f = 0; f < job.parts[p].add.size(); ++f) addPlaced(loaded[p].features[f].corners);
     }
     maskJob.previewModel = plateModel;
+    maskJob.previewRunner = parallelChunkRunner();
     maskSink = makeMaskSink(out, maskJob, job.overwrite);
     maskJob.previewModel = {};
   }

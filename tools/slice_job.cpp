@@ -612,6 +612,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     struct stat info {};
     if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
     maskJob.previewModel = soup.corners;  // rendered by the sink now, not kept
+    maskJob.previewRunner = parallelChunkRunner();
     maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
     maskJob.previewModel = {};
   }

@@ -61,86 +61,161 @@ Point3f previewLightDirection() {
   return {static_cast<float>(l.x), static_cast<float>(l.y), static_cast<float>(l.z)};
 }
 
-void renderPreview(std::span<const Point3f> corners, uint32_t width, uint32_t height, RgbImage& out) {
-  constexpr uint32_t kSamples = 2;  // per pixel and axis
+namespace {
+
+struct ScreenBox {
+  double minX = std::numeric_limits<double>::infinity(), maxX = -minX, minY = minX, maxY = -minX;
+};
+
+// Depth towards the viewer (larger is nearer) and shade (negative: background) per sample.
+struct SampleBuffer {
+  std::vector<float> depth, shade;
+  void reset(std::size_t samples) {
+    depth.assign(samples, -std::numeric_limits<float>::infinity());
+    shade.assign(samples, -1.0f);
+  }
+};
+
+// The screen transform: a model point to sample coordinates (x right, y down) and depth.
+struct Projection {
+  Camera cam;
+  double scale, cx, cy, halfW, halfH;
+};
+
+// Draws facets [f0, f1) into `buffer` (sw x sh samples): a sample takes the nearest facet's shade, and
+// among facets at the same depth the first one.
+void drawFacets(std::span<const Point3f> corners, std::size_t f0, std::size_t f1, const Projection& proj,
+                const Vec3& light, uint32_t sw, uint32_t sh, SampleBuffer& buffer) {
+  const Camera& cam = proj.cam;
+  for (std::size_t f = f0; f < f1; ++f) {
+    const Point3f* c = &corners[3 * f];
+    if (!finite(c[0]) || !finite(c[1]) || !finite(c[2])) continue;
+    double sx[3], sy[3], sd[3];
+    for (int k = 0; k < 3; ++k) {
+      const Vec3 p = toVec(c[k]);
+      sx[k] = proj.halfW + (dot(p, cam.right) - proj.cx) * proj.scale;
+      sy[k] = proj.halfH - (dot(p, cam.up) - proj.cy) * proj.scale;
+      sd[k] = dot(p, cam.toward);
+    }
+    const double area = edge(sx[0], sy[0], sx[1], sy[1], sx[2], sy[2]);
+    if (!(std::abs(area) > 1e-12)) continue;
+    Vec3 n = normalized(cross(toVec(c[1]) - toVec(c[0]), toVec(c[2]) - toVec(c[0])));
+    if (dot(n, cam.toward) < 0) n = {-n.x, -n.y, -n.z};
+    const float s = static_cast<float>(0.25 + 0.75 * std::max(0.0, dot(n, light)));
+    const double loX = std::max(0.0, std::floor(std::min({sx[0], sx[1], sx[2]})));
+    const double hiX = std::min(sw - 1.0, std::ceil(std::max({sx[0], sx[1], sx[2]})));
+    const double loY = std::max(0.0, std::floor(std::min({sy[0], sy[1], sy[2]})));
+    const double hiY = std::min(sh - 1.0, std::ceil(std::max({sy[0], sy[1], sy[2]})));
+    for (double y = loY; y <= hiY; ++y) {
+      const double py = y + 0.5;
+      for (double x = loX; x <= hiX; ++x) {
+        const double px = x + 0.5;
+        const double b0 = edge(sx[1], sy[1], sx[2], sy[2], px, py) / area;
+        const double b1 = edge(sx[2], sy[2], sx[0], sy[0], px, py) / area;
+        const double b2 = 1 - b0 - b1;
+        if (b0 < 0 || b1 < 0 || b2 < 0) continue;
+        const float d = static_cast<float>(b0 * sd[0] + b1 * sd[1] + b2 * sd[2]);
+        const std::size_t at = static_cast<std::size_t>(y) * sw + static_cast<std::size_t>(x);
+        if (d > buffer.depth[at]) {
+          buffer.depth[at] = d;
+          buffer.shade[at] = s;
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+
+void renderPreview(std::span<const Point3f> corners, uint32_t width, uint32_t height, RgbImage& out,
+                   const ChunkRunner& runner) {
+  constexpr uint32_t kSamples = 2;             // per pixel and axis
+  constexpr std::size_t kBoundsGrain = 32768;  // facets per chunk of the bounding box
+  // Facets per piece drawn into its own buffer, and at most this many pieces (each holds a buffer).
+  constexpr std::size_t kMinPieceFacets = 32768;
+  constexpr std::size_t kMaxPieces = 8;
   out.width = width;
   out.height = height;
   out.rgb.assign(std::size_t{width} * height * 3, 0);
   const uint32_t sw = width * kSamples, sh = height * kSamples;
-  // Per sample: depth towards the viewer (larger is nearer) and shade (negative: background).
-  std::vector<float> depth(std::size_t{sw} * sh, -std::numeric_limits<float>::infinity());
-  std::vector<float> shade(std::size_t{sw} * sh, -1.0f);
+  const std::size_t samples = std::size_t{sw} * sh;
 
-  const Camera cam = previewCamera();
+  Projection proj{previewCamera(), 0, 0, 0, 0.5 * sw, 0.5 * sh};
+  const Camera& cam = proj.cam;
   const Point3f lf = previewLightDirection();
   const Vec3 light{lf.x, lf.y, lf.z};
-  double minX = std::numeric_limits<double>::infinity(), maxX = -minX, minY = minX, maxY = -minX;
   const std::size_t facets = corners.size() / 3;
-  for (std::size_t i = 0; i < facets * 3; ++i) {
-    if (!finite(corners[i])) continue;
-    const Vec3 p = toVec(corners[i]);
-    const double x = dot(p, cam.right), y = dot(p, cam.up);
-    minX = std::min(minX, x);
-    maxX = std::max(maxX, x);
-    minY = std::min(minY, y);
-    maxY = std::max(maxY, y);
-  }
-  if (minX <= maxX) {
-    const double margin = 0.06 * std::min(sw, sh);
-    const double spanX = std::max(maxX - minX, 1e-12), spanY = std::max(maxY - minY, 1e-12);
-    const double scale = std::min((sw - 2 * margin) / spanX, (sh - 2 * margin) / spanY);
-    const double cx = 0.5 * (minX + maxX), cy = 0.5 * (minY + maxY);
-    for (std::size_t f = 0; f < facets; ++f) {
-      const Point3f* c = &corners[3 * f];
-      if (!finite(c[0]) || !finite(c[1]) || !finite(c[2])) continue;
-      double sx[3], sy[3], sd[3];
-      for (int k = 0; k < 3; ++k) {
-        const Vec3 p = toVec(c[k]);
-        sx[k] = 0.5 * sw + (dot(p, cam.right) - cx) * scale;
-        sy[k] = 0.5 * sh - (dot(p, cam.up) - cy) * scale;
-        sd[k] = dot(p, cam.toward);
+  // The projected bounding box, per chunk, then combined (min and max: the same for any split).
+  std::vector<ScreenBox> boxes((facets + kBoundsGrain - 1) / kBoundsGrain);
+  runner.run(boxes.size(), 1, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b) {
+      ScreenBox& box = boxes[b];
+      const std::size_t end = std::min(facets, (b + 1) * kBoundsGrain) * 3;
+      for (std::size_t i = b * kBoundsGrain * 3; i < end; ++i) {
+        if (!finite(corners[i])) continue;
+        const Vec3 p = toVec(corners[i]);
+        const double x = dot(p, cam.right), y = dot(p, cam.up);
+        box.minX = std::min(box.minX, x);
+        box.maxX = std::max(box.maxX, x);
+        box.minY = std::min(box.minY, y);
+        box.maxY = std::max(box.maxY, y);
       }
-      const double area = edge(sx[0], sy[0], sx[1], sy[1], sx[2], sy[2]);
-      if (!(std::abs(area) > 1e-12)) continue;
-      Vec3 n = normalized(cross(toVec(c[1]) - toVec(c[0]), toVec(c[2]) - toVec(c[0])));
-      if (dot(n, cam.toward) < 0) n = {-n.x, -n.y, -n.z};
-      const float s = static_cast<float>(0.25 + 0.75 * std::max(0.0, dot(n, light)));
-      const double loX = std::max(0.0, std::floor(std::min({sx[0], sx[1], sx[2]})));
-      const double hiX = std::min(sw - 1.0, std::ceil(std::max({sx[0], sx[1], sx[2]})));
-      const double loY = std::max(0.0, std::floor(std::min({sy[0], sy[1], sy[2]})));
-      const double hiY = std::min(sh - 1.0, std::ceil(std::max({sy[0], sy[1], sy[2]})));
-      for (double y = loY; y <= hiY; ++y) {
-        const double py = y + 0.5;
-        for (double x = loX; x <= hiX; ++x) {
-          const double px = x + 0.5;
-          const double b0 = edge(sx[1], sy[1], sx[2], sy[2], px, py) / area;
-          const double b1 = edge(sx[2], sy[2], sx[0], sy[0], px, py) / area;
-          const double b2 = 1 - b0 - b1;
-          if (b0 < 0 || b1 < 0 || b2 < 0) continue;
-          const float d = static_cast<float>(b0 * sd[0] + b1 * sd[1] + b2 * sd[2]);
-          const std::size_t at = static_cast<std::size_t>(y) * sw + static_cast<std::size_t>(x);
-          if (d > depth[at]) {
-            depth[at] = d;
-            shade[at] = s;
+    }
+  });
+  ScreenBox all;
+  for (const ScreenBox& b : boxes) {
+    all.minX = std::min(all.minX, b.minX);
+    all.maxX = std::max(all.maxX, b.maxX);
+    all.minY = std::min(all.minY, b.minY);
+    all.maxY = std::max(all.maxY, b.maxY);
+  }
+  // Facets are split into pieces, each drawn into its own buffer; merged in piece order, a sample keeps
+  // the first piece's facet among the nearest, so the picture is the serial one for any split.
+  const std::size_t pieces =
+      all.minX <= all.maxX ? std::clamp<std::size_t>(
+                                 std::min<std::size_t>(runner.width, facets / kMinPieceFacets), 1, kMaxPieces)
+                           : 1;
+  std::vector<SampleBuffer> buffers(pieces);
+  if (all.minX <= all.maxX) {
+    const double margin = 0.06 * std::min(sw, sh);
+    const double spanX = std::max(all.maxX - all.minX, 1e-12), spanY = std::max(all.maxY - all.minY, 1e-12);
+    proj.scale = std::min((sw - 2 * margin) / spanX, (sh - 2 * margin) / spanY);
+    proj.cx = 0.5 * (all.minX + all.maxX);
+    proj.cy = 0.5 * (all.minY + all.maxY);
+    runner.run(pieces, 1, [&](std::size_t p0, std::size_t p1) {
+      for (std::size_t p = p0; p < p1; ++p) {
+        buffers[p].reset(samples);
+        drawFacets(corners, facets * p / pieces, facets * (p + 1) / pieces, proj, light, sw, sh, buffers[p]);
+      }
+    });
+  } else {
+    buffers[0].reset(samples);
+  }
+  SampleBuffer& merged = buffers[0];
+  runner.run(height, 16, [&](std::size_t y0, std::size_t y1) {
+    for (std::size_t at = y0 * kSamples * sw; at < y1 * kSamples * sw; ++at) {
+      for (std::size_t p = 1; p < pieces; ++p) {
+        if (buffers[p].depth[at] > merged.depth[at]) {
+          merged.depth[at] = buffers[p].depth[at];
+          merged.shade[at] = buffers[p].shade[at];
+        }
+      }
+    }
+    for (std::size_t y = y0; y < y1; ++y) {
+      for (uint32_t x = 0; x < width; ++x) {
+        double sum[3] = {0, 0, 0};
+        for (uint32_t j = 0; j < kSamples; ++j) {
+          for (uint32_t i = 0; i < kSamples; ++i) {
+            const float s = merged.shade[(y * kSamples + j) * sw + x * kSamples + i];
+            for (int k = 0; k < 3; ++k) sum[k] += s < 0 ? kPreviewBackground[k] : kPreviewModel[k] * s;
           }
         }
+        uint8_t* px = &out.rgb[(y * width + x) * 3];
+        for (int k = 0; k < 3; ++k)
+          px[k] = static_cast<uint8_t>(std::lround(std::min(255.0, sum[k] / (kSamples * kSamples))));
       }
     }
-  }
-  for (uint32_t y = 0; y < height; ++y) {
-    for (uint32_t x = 0; x < width; ++x) {
-      double sum[3] = {0, 0, 0};
-      for (uint32_t j = 0; j < kSamples; ++j) {
-        for (uint32_t i = 0; i < kSamples; ++i) {
-          const float s = shade[std::size_t{y * kSamples + j} * sw + x * kSamples + i];
-          for (int k = 0; k < 3; ++k) sum[k] += s < 0 ? kPreviewBackground[k] : kPreviewModel[k] * s;
-        }
-      }
-      uint8_t* px = &out.rgb[(std::size_t{y} * width + x) * 3];
-      for (int k = 0; k < 3; ++k)
-        px[k] = static_cast<uint8_t>(std::lround(std::min(255.0, sum[k] / (kSamples * kSamples))));
-    }
-  }
+  });
 }
 
 }  // namespace toposlice

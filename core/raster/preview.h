@@ -6,13 +6,15 @@
 // model fitted into the picture with a margin and centred. Triangles are rasterized with a depth buffer
 // at 2 x 2 samples per pixel (averaged, so edges are smooth), one flat Lambert shade per facet from a
 // light above, in front and to the left. Facets are lit on the side that faces the camera, so an
-// inside-out mesh still shows. Plain serial code: the same mesh gives the same pixels.
+// inside-out mesh still shows. Plain C++, split into chunks by a ChunkRunner (core/chunk_runner.h): the
+// same mesh gives the same pixels however it is split.
 #pragma once
 
 #include <cstdint>
 #include <span>
 #include <vector>
 
+#include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 
 namespace toposlice {
@@ -33,7 +35,9 @@ Point3f previewLightDirection();
 
 // Renders the facet soup `corners` (3 per facet, counter-clockwise seen from outside) into `out`
 // (replaced) of width x height >= 1. Facets with a non-finite corner are skipped; an empty mesh gives
-// the background alone.
-void renderPreview(std::span<const Point3f> corners, uint32_t width, uint32_t height, RgbImage& out);
+// the background alone. `runner` runs the bounding box, pieces of the facets (each drawn into its own
+// depth buffer, at most 8 at once) and the merge; the picture is the same for any runner.
+void renderPreview(std::span<const Point3f> corners, uint32_t width, uint32_t height, RgbImage& out,
+                   const ChunkRunner& runner = serialChunkRunner());
 
 }  // namespace toposlice

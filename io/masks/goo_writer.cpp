@@ -186,9 +186,9 @@ class GooSink final : public EncodingMaskSink {
       throw OutputError(path.string() + ": a GOO file holds at most 65535 x 65535 pixels");
     RgbImage image;
     BigEndian out(previews_);
-    renderPreview(job.previewModel, kGooSmallPreview, kGooSmallPreview, image);
+    renderPreview(job.previewModel, kGooSmallPreview, kGooSmallPreview, image, job.previewRunner);
     appendRgb565(out, image);
-    renderPreview(job.previewModel, kGooBigPreview, kGooBigPreview, image);
+    renderPreview(job.previewModel, kGooBigPreview, kGooBigPreview, image, job.previewRunner);
     appendRgb565(out, image);
     const std::vector<uint8_t> header = gooHeader(job_, 0, previews_);
     file_.write(header.data(), header.size());

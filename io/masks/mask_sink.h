@@ -26,6 +26,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 #include "core/raster/mask_image.h"
 #include "io/masks/deflate_runs.h"
@@ -71,6 +72,9 @@ struct MaskJob {
   // Read only while makeMaskSink runs: sinks render what they need then and keep no reference.
   // Empty: the previews show no model.
   std::span<const Point3f> previewModel;
+  // Runs the preview renderer's chunks (the tools give parallelChunkRunner); the pictures are the same
+  // for any runner.
+  ChunkRunner previewRunner = serialChunkRunner();
 };
 
 // One layer as encodeLayer leaves it for writeEncodedLayer.

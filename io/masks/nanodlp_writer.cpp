@@ -57,7 +57,7 @@ class NanoDlpSink final : public EncodingMaskSink {
       : file_(path, overwrite),
         job_(job),
         zip_(file_, std::max<std::time_t>(maskCreationTime(job), 315532800)),
-        preview_(previewPng(job.previewModel, kPreviewWidth, kPreviewHeight)) {
+        preview_(previewPng(job.previewModel, kPreviewWidth, kPreviewHeight, job.previewRunner)) {
     job_.previewModel = {};
   }
 

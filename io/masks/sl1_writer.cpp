@@ -77,8 +77,8 @@ class Sl1Sink final : public EncodingMaskSink {
     }
     job_.previewModel = {};
     if (!job.previewModel.empty()) {  // PrusaSlicer's two thumbnails, as it names them
-      zip_.add("thumbnail/thumbnail400x400.png", previewPng(job.previewModel, 400, 400));
-      zip_.add("thumbnail/thumbnail800x480.png", previewPng(job.previewModel, 800, 480));
+      zip_.add("thumbnail/thumbnail400x400.png", previewPng(job.previewModel, 400, 400, job.previewRunner));
+      zip_.add("thumbnail/thumbnail800x480.png", previewPng(job.previewModel, 800, 480, job.previewRunner));
     }
   }
 
