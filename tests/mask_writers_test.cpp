@@ -300,6 +300,30 @@ MaskImage withExtents(MaskImage m) {
   return m;
 }
 
+// A binary mask (0 and 255) with its extents and maximal lit runs, as the binary rasterizer keeps them.
+MaskImage withRuns(MaskImage m) {
+  m = withExtents(std::move(m));
+  m.runs.clear();
+  m.rowRuns.assign(2 * size_t{m.height}, 0);
+  for (uint32_t r = 0; r < m.height; ++r) {
+    const uint8_t* row = m.pixels.data() + size_t{r} * m.width;
+    m.rowRuns[2 * r] = static_cast<uint32_t>(m.runs.size() / 2);
+    for (uint32_t i = 0; i < m.width;) {
+      if (row[i] == 0) {
+        ++i;
+        continue;
+      }
+      uint32_t e = i;
+      while (e < m.width && row[e] != 0) ++e;
+      m.runs.push_back(i);
+      m.runs.push_back(e);
+      i = e;
+    }
+    m.rowRuns[2 * r + 1] = static_cast<uint32_t>(m.runs.size() / 2 - m.rowRuns[2 * r]);
+  }
+  return m;
+}
+
 uint32_t bigEndian32(const uint8_t* p) {
   return (uint32_t{p[0]} << 24) | (uint32_t{p[1]} << 16) | (uint32_t{p[2]} << 8) | p[3];
 }
@@ -536,6 +560,29 @@ TEST(PngEncode, ZlibInflatesRandomRunImages) {
     const MaskImage& mask = trial % 2 ? m : withExtents(m);
     const MaskPngCode code = trial % 4 == 3 ? MaskPngCode::fixed : MaskPngCode::smallest;
     ASSERT_NE(expectInflatesExactly(mask, code), -1) << "trial " << trial << ", " << width << "x" << height;
+  }
+}
+
+TEST(PngEncode, BinaryMasksFromRunsGiveTheSameBytes) {
+  // The coder reads a binary mask from its rows' runs when it has them (mask_image.h): the same PNG as
+  // from the pixels, with or without extents, under both codes; repeated, dark and full rows, runs
+  // around the 258-byte match limit, rows wider than the deflate window.
+  std::mt19937 rng(777);
+  const auto below = [&rng](uint32_t n) { return static_cast<uint32_t>(rng() % n); };
+  for (uint32_t trial = 0; trial < 300; ++trial) {
+    const uint32_t width = trial == 0 ? 40000 : 1 + below(trial % 5 == 0 ? 3 : 900), height = 1 + below(60);
+    MaskImage m = randomRunMask(width, height, 2, 1 + below(trial % 2 ? 8 : 700), true, below);
+    if (trial % 7 == 0) std::fill(m.pixels.begin(), m.pixels.end(), uint8_t{255});
+    const MaskPngCode code = trial % 4 == 3 ? MaskPngCode::fixed : MaskPngCode::smallest;
+    std::vector<uint8_t> plain, extents, runs;
+    MaskPngScratch scratch;
+    encodeMaskPng(m, plain, scratch, code);
+    encodeMaskPng(withExtents(m), extents, scratch, code);
+    const MaskImage fromRuns = withRuns(m);
+    ASSERT_TRUE(fromRuns.hasRuns());
+    ASSERT_NE(expectInflatesExactly(fromRuns, code, &runs), -1) << "trial " << trial;
+    ASSERT_EQ(runs, plain) << "trial " << trial << ", " << width << "x" << height;
+    ASSERT_EQ(extents, plain) << "trial " << trial;
   }
 }
 

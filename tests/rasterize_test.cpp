@@ -103,6 +103,33 @@ void expectPattern(const MaskImage& m, const std::function<bool(uint32_t, uint32
   }
 }
 
+// The binary rasterizer's runs (mask_image.h) describe its pixels exactly: in increasing x, maximal,
+// 255 inside and 0 elsewhere; the extents are the first and last run's ends.
+void expectRunsDescribePixels(const MaskImage& m) {
+  ASSERT_TRUE(m.hasRuns());
+  for (uint32_t r = 0; r < m.height; ++r) {
+    std::vector<uint8_t> expected(m.width, 0);
+    const uint32_t first = m.rowRuns[2 * r], count = m.rowRuns[2 * r + 1];
+    for (uint32_t k = first; k < first + count; ++k) {
+      const uint32_t a = m.runs[2 * k], b = m.runs[2 * k + 1];
+      ASSERT_LT(a, b) << "row " << r;
+      ASSERT_LE(b, m.width) << "row " << r;
+      if (k > first) {
+        ASSERT_GT(a, m.runs[2 * k - 1]) << "row " << r << ": runs touch or are out of order";
+      }
+      std::fill(expected.begin() + a, expected.begin() + b, uint8_t{255});
+    }
+    ASSERT_TRUE(std::equal(expected.begin(), expected.end(), m.pixels.begin() + size_t{r} * m.width))
+        << "row " << r;
+    if (count > 0) {
+      EXPECT_EQ(m.litBegin[r], m.runs[2 * first]) << "row " << r;
+      EXPECT_EQ(m.litEnd[r], m.runs[2 * (first + count) - 1]) << "row " << r;
+    } else {
+      EXPECT_GE(m.litBegin[r], m.litEnd[r]) << "row " << r;
+    }
+  }
+}
+
 std::size_t litInRow(const MaskImage& m, uint32_t j) {
   std::size_t n = 0;
   for (uint32_t i = 0; i < m.width; ++i) n += at(m, i, j) != 0 ? 1 : 0;
@@ -402,9 +429,40 @@ TEST(RasterBinary, MatchesBruteForceWindingOnRandomLoops) {
         ASSERT_EQ(at(m, i, j), solid ? 255 : 0) << "trial " << trial << " pixel " << i << "," << j;
       }
     }
+    expectRunsDescribePixels(m);
     litTotal += countLitPixels(m);
   }
   EXPECT_GT(litTotal, 200u * 24 * 22 / 10);  // the fixtures are not trivially empty
+}
+
+TEST(RasterBinary, RunsOfMirroredAndPortraitGridsDescribeTheirPixels) {
+  // Rows of several runs (random self-intersecting loops), mirrored and transposed grids, one image and
+  // scratch reused throughout (the next layer is cleared from the previous layer's runs): every mask is
+  // the flip of the plain one, pixel for pixel, and its runs describe it.
+  std::mt19937 rng(99);
+  RasterScratch scratch;
+  MaskImage m;
+  std::size_t multiRunRows = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    const std::vector<LayerContours> layers = randomLayers(rng);
+    const std::vector<ContourSet> sets = {{&layers[0], 1}, {&layers[1], 1}, {&layers[2], -1}};
+    PixelGrid grid = makeGrid(0.1, -0.2, 0.9, 26, 23);
+    grid.transposed = trial % 2 == 1;
+    const MaskImage plain = binary(sets, grid);
+    grid.mirrorX = trial % 3 != 0;
+    grid.mirrorY = trial % 4 >= 2;
+    rasterizeBinary(sets, grid, m, scratch);
+    expectRunsDescribePixels(m);
+    for (uint32_t j = 0; j < grid.height; ++j) {
+      multiRunRows += m.rowRuns[2 * j + 1] > 1 ? 1 : 0;
+      for (uint32_t i = 0; i < grid.width; ++i) {
+        const uint32_t mi = grid.mirrorX ? grid.width - 1 - i : i,
+                       mj = grid.mirrorY ? grid.height - 1 - j : j;
+        ASSERT_EQ(at(m, mi, mj), at(plain, i, j)) << "trial " << trial << " pixel " << i << "," << j;
+      }
+    }
+  }
+  EXPECT_GT(multiRunRows, 500u);
 }
 
 TEST(RasterCoverage, MatchesExactClippingOnRandomLoops) {

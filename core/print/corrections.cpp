@@ -36,8 +36,7 @@ std::array<uint8_t, 256> gammaTable(double gamma) {
 
 void applyTable(MaskImage& mask, const std::array<uint8_t, 256>& table) {
   for (uint8_t& v : mask.pixels) v = table[v];
-  mask.litBegin.clear();
-  mask.litEnd.clear();
+  mask.forgetLayout();
 }
 
 void applyLightMap(MaskImage& mask, const MaskImage& map) {
@@ -46,8 +45,7 @@ void applyLightMap(MaskImage& mask, const MaskImage& map) {
     const unsigned v = mask.pixels[i];
     if (v != 0) mask.pixels[i] = static_cast<uint8_t>((v * map.pixels[i] + 127u) / 255u);
   }
-  mask.litBegin.clear();
-  mask.litEnd.clear();
+  mask.forgetLayout();
 }
 
 }  // namespace toposlice

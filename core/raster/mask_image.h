@@ -6,6 +6,7 @@
 // to 255 (fully lit); a binary mask holds only 0 and 255.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -31,6 +32,21 @@ struct MaskImage {
   // anyone else changing `pixels` must clear them.
   std::vector<uint32_t> litBegin, litEnd;
   bool hasExtents() const { return litBegin.size() == height && litEnd.size() == height && height > 0; }
+  // Optional, binary masks only (values 0 and 255): the lit runs of each stored row r, in increasing x
+  // and maximal (no two touch): pixel i is 255 where runs[2k] <= i < runs[2k + 1] for some k in
+  // [rowRuns[2r], rowRuns[2r] + rowRuns[2r + 1]), and 0 elsewhere in the row. rowRuns holds 2 * height
+  // entries when the runs are known (always with the extents), else none. The binary rasterizer keeps
+  // them, so the PNG coder and the clearing of the next layer touch lit pixels only, not the dark gaps
+  // between the parts of a plate.
+  std::vector<uint32_t> runs, rowRuns;
+  bool hasRuns() const { return rowRuns.size() == std::size_t{2} * height && height > 0 && hasExtents(); }
+  // Forgets the extents and the runs: for anyone who changes `pixels` another way.
+  void forgetLayout() {
+    litBegin.clear();
+    litEnd.clear();
+    runs.clear();
+    rowRuns.clear();
+  }
 };
 
 }  // namespace toposlice

@@ -562,13 +562,21 @@ void prepareImage(const PixelGrid& grid, MaskImage& out) {
   if (!reuse) std::fill(out.pixels.begin(), out.pixels.end(), uint8_t{0});
   out.litBegin.resize(height);
   out.litEnd.resize(height);
+  const bool runs = reuse && out.hasRuns();  // then only the runs are lit, not the gaps between them
   for (uint32_t r = 0; r < height; ++r) {
-    if (reuse && out.litBegin[r] < out.litEnd[r])
-      std::memset(out.pixels.data() + static_cast<std::size_t>(r) * width + out.litBegin[r], 0,
-                  out.litEnd[r] - out.litBegin[r]);
+    uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
+    if (runs) {
+      const uint32_t* run = out.runs.data() + 2 * std::size_t{out.rowRuns[2 * r]};
+      for (uint32_t k = 0; k < out.rowRuns[2 * r + 1]; ++k)
+        std::memset(row + run[2 * k], 0, run[2 * k + 1] - run[2 * k]);
+    } else if (reuse && out.litBegin[r] < out.litEnd[r]) {
+      std::memset(row + out.litBegin[r], 0, out.litEnd[r] - out.litBegin[r]);
+    }
     out.litBegin[r] = width;
     out.litEnd[r] = 0;
   }
+  out.runs.clear();
+  out.rowRuns.clear();
 }
 
 }  // namespace
@@ -581,25 +589,49 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
   prepareImage(grid, out);  // with known extents only the previous image's lit spans are cleared
   if (width == 0 || height == 0 || !usableGrid(grid)) return;
 
+  out.rowRuns.assign(std::size_t{2} * height, 0);
+  std::vector<uint32_t>& runs = out.runs;
   buildEdgeTable(sets, grid.y0, grid.pixel, height, grid.transposed, scratch);
   for (uint32_t j = 0; j < height; ++j) {
     if (!hasWork(j, scratch)) continue;
     const uint32_t r = grid.mirrorY ? height - 1 - j : j;
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     advanceTo(j, samplePosition(grid.y0, grid.pixel, j), scratch);
-    uint32_t lo = width, hi = 0;
+    const std::size_t first = runs.size();
     forEachSolidRun(scratch.active, [&](double xa, double xb) {
       const uint32_t ia = firstSampleAtOrAbove(xa, grid.x0, grid.pixel, width);
       const uint32_t ib = firstSampleAtOrAbove(xb, grid.x0, grid.pixel, width);
       if (ia >= ib) return;
       const uint32_t a = grid.mirrorX ? width - ib : ia, b = grid.mirrorX ? width - ia : ib;
       std::memset(row + a, 255, b - a);
-      lo = std::min(lo, a);
-      hi = std::max(hi, b);
+      runs.push_back(a);
+      runs.push_back(b);
       if (litPixels) *litPixels += ib - ia;
     });
-    out.litBegin[r] = lo;
-    out.litEnd[r] = hi;
+    if (runs.size() == first) continue;
+    // Runs in increasing x (a mirror emits them right to left), then joined where they touch (two solid
+    // runs with no pixel centre between them).
+    if (grid.mirrorX) {
+      for (std::size_t p = first, q = runs.size() - 2; p < q; p += 2, q -= 2) {
+        std::swap(runs[p], runs[q]);
+        std::swap(runs[p + 1], runs[q + 1]);
+      }
+    }
+    std::size_t kept = first;
+    for (std::size_t p = first + 2; p < runs.size(); p += 2) {
+      if (runs[p] == runs[kept + 1]) {
+        runs[kept + 1] = runs[p + 1];
+      } else {
+        kept += 2;
+        runs[kept] = runs[p];
+        runs[kept + 1] = runs[p + 1];
+      }
+    }
+    runs.resize(kept + 2);
+    out.rowRuns[2 * r] = static_cast<uint32_t>(first / 2);
+    out.rowRuns[2 * r + 1] = static_cast<uint32_t>((runs.size() - first) / 2);
+    out.litBegin[r] = runs[first];
+    out.litEnd[r] = runs.back();
   }
 }
 

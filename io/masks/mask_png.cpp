@@ -6,6 +6,7 @@
 #include <cassert>
 #include <cstring>
 #include <memory>
+#include <span>
 
 #include <spng.h>
 #include <zlib.h>
@@ -65,10 +66,43 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
   // With known extents (mask_image.h) dark pixels are never read: rows compare on their lit spans and
   // zero runs outside them are known without scanning.
   const bool extents = mask.hasExtents();
+  // With runs (a binary mask from the rasterizer), rows are coded and compared from their runs: lit
+  // pixels are not even read.
+  const bool runs = mask.hasRuns();
   size_t previousBegin = 0, previousEnd = width;
+  std::span<const uint32_t> previousRuns;
   for (size_t r = 0; r < height; ++r) {
     const size_t stored = height - 1 - r;
     const uint8_t* row = mask.pixels.data() + stored * width;
+    if (runs) {
+      const std::span<const uint32_t> rowRuns(mask.runs.data() + 2 * size_t{mask.rowRuns[2 * stored]},
+                                              2 * size_t{mask.rowRuns[2 * stored + 1]});
+      const bool same = r > 0 && rowRuns.size() == previousRuns.size() &&
+                        std::equal(rowRuns.begin(), rowRuns.end(), previousRuns.begin());
+      previousRuns = rowRuns;
+      if (rowCopies && same && !previousDark) {
+        tokens.putCopy(n, row[width - 1]);
+      } else {
+        // Zeros (after the filter byte 0) up to the first run, then each run of 255 and the zeros after it.
+        sums = RowSums{};
+        const auto put = [&](uint64_t offset, uint64_t length, uint8_t value) {
+          sums.addRun(n, offset, length, value);
+          tokens.putBytes(value, static_cast<uint32_t>(length));
+        };
+        size_t p = rowRuns.empty() ? width : rowRuns[0];
+        put(0, p + 1, 0);
+        for (size_t k = 0; k < rowRuns.size(); k += 2) {
+          assert(row[rowRuns[k]] == 255);
+          put(rowRuns[k] + 1, rowRuns[k + 1] - rowRuns[k], 255);
+          p = k + 2 < rowRuns.size() ? rowRuns[k + 2] : width;
+          if (p > rowRuns[k + 1]) put(rowRuns[k + 1] + 1, p - rowRuns[k + 1], 0);
+        }
+        previousDark = rowRuns.empty();
+      }
+      adlerB = (adlerB + n * adlerA + sums.t) % kAdlerModulus;
+      adlerA = (adlerA + sums.s) % kAdlerModulus;
+      continue;
+    }
     size_t litBegin = 0, litEnd = width;
     if (extents) {
       litBegin = mask.litBegin[stored];

@@ -28,8 +28,7 @@ void MaskSink::encodeLayer(uint32_t /*index*/, double /*z*/, const MaskImage& ma
 void MaskSink::writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) {
   decoded_.width = layer.width;
   decoded_.height = layer.height;
-  decoded_.litBegin.clear();
-  decoded_.litEnd.clear();
+  decoded_.forgetLayout();
   if (!decodeMaskRuns(layer.bytes, decoded_)) {
     throw OutputError("layer " + std::to_string(index) + ": malformed mask runs");
   }
