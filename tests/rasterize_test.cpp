@@ -435,6 +435,36 @@ TEST(RasterBinary, MatchesBruteForceWindingOnRandomLoops) {
   EXPECT_GT(litTotal, 200u * 24 * 22 / 10);  // the fixtures are not trivially empty
 }
 
+TEST(RasterBinary, ManyEdgesStartingOnOneLineMatchBruteForce) {
+  // Rows where more than 32 edges start at once (the parts of a plate): they are sorted apart and
+  // merged into the active list. Slanted, overlapping, reversed and coincident triangles, starting on
+  // three sample lines, against the brute-force winding at every pixel centre.
+  std::mt19937 rng(314);
+  std::uniform_real_distribution<double> x(0.0, 60.0), dx(-3.0, 3.0), top(4.0, 19.0);
+  const PixelGrid grid = unitGrid(60, 20);
+  RasterScratch scratch;
+  MaskImage m;
+  for (int trial = 0; trial < 20; ++trial) {
+    std::vector<Loop> loops;
+    for (int t = 0; t < 60; ++t) {
+      const double y0 = 0.2 + (t % 3) * 1.0, x0 = x(rng), w = 0.3 + 2.0 * (t % 5) / 4.0;
+      Loop tri{{x0, y0}, {x0 + w, y0}, {x0 + dx(rng), top(rng)}};
+      loops.push_back(t % 7 == 3 ? reversed(tri) : tri);
+      if (t % 11 == 5) loops.push_back(tri);  // coincident edges
+    }
+    const LayerContours layer = makeLayer(loops);
+    const std::vector<ContourSet> sets = {{&layer, 1}};
+    rasterizeBinary(sets, grid, m, scratch);
+    for (uint32_t j = 0; j < grid.height; ++j) {
+      for (uint32_t i = 0; i < grid.width; ++i) {
+        const bool solid = bruteWinding(sets, i + 0.5, j + 0.5) > 0;
+        ASSERT_EQ(at(m, i, j), solid ? 255 : 0) << "trial " << trial << " pixel " << i << "," << j;
+      }
+    }
+    expectRunsDescribePixels(m);
+  }
+}
+
 TEST(RasterBinary, RunsOfMirroredAndPortraitGridsDescribeTheirPixels) {
   // Rows of several runs (random self-intersecting loops), mirrored and transposed grids, one image and
   // scratch reused throughout (the next layer is cleared from the previous layer's runs): every mask is

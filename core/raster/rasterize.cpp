@@ -17,6 +17,9 @@ namespace {
 // O(edges^3) per row when most pairs cross. Above this many edges such a band is sampled instead.
 constexpr std::size_t kMaxExactCrossingEdges = 64;
 constexpr double kSampleLinesPerPixel = 16.0;
+// Above this many edges starting on one sample line, they are sorted apart and merged into the active
+// list (advanceTo).
+constexpr uint32_t kMergeIncoming = 32;
 
 double samplePosition(double origin, double pitch, uint32_t k) {
   return origin + (static_cast<double>(k) + 0.5) * pitch;
@@ -136,7 +139,10 @@ void sortByX(std::vector<RasterEdge>& edges) {
 }
 
 // Moves the active edge table to sample line k at height y: drops edges that ended, adds the edges whose
-// first line is k, computes every crossing and sorts by x.
+// first line is k, computes every crossing and sorts by x. The edges that go on are nearly sorted already
+// (insertion sort); a few new ones are appended and moved into place by it, many (the parts of a plate)
+// are sorted on their own and merged in, so that they do not make the whole line's order be sorted
+// again. Edges of equal x may come in any order: the runs sum their windings first.
 void advanceTo(uint32_t k, double y, RasterScratch& scratch) {
   std::vector<RasterEdge>& active = scratch.active;
   std::size_t kept = 0;
@@ -147,12 +153,30 @@ void advanceTo(uint32_t k, double y, RasterScratch& scratch) {
     active[kept++] = e;
   }
   active.resize(kept);
-  for (uint32_t b = scratch.bucketStart[k]; b < scratch.bucketStart[k + 1]; ++b) {
-    RasterEdge e = scratch.bucketed[b];
-    e.x = e.xLow + (y - e.yLow) * e.slope;
-    active.push_back(e);
+  const uint32_t b0 = scratch.bucketStart[k], b1 = scratch.bucketStart[k + 1];
+  if (b1 - b0 <= kMergeIncoming) {  // a few: appended and moved into place by the insertion sort
+    for (uint32_t b = b0; b < b1; ++b) {
+      RasterEdge e = scratch.bucketed[b];
+      e.x = e.xLow + (y - e.yLow) * e.slope;
+      active.push_back(e);
+    }
+    sortByX(active);
+    return;
   }
   sortByX(active);
+  std::vector<RasterEdge>& incoming = scratch.incoming;
+  incoming.assign(scratch.bucketed.begin() + b0, scratch.bucketed.begin() + b1);
+  for (RasterEdge& e : incoming) e.x = e.xLow + (y - e.yLow) * e.slope;
+  sortByX(incoming);
+  // Merged from the back, in place.
+  active.resize(kept + incoming.size());
+  std::size_t w = active.size(), i = kept, j = incoming.size();
+  while (j > 0) {
+    if (i > 0 && active[i - 1].x > incoming[j - 1].x)
+      active[--w] = active[--i];
+    else
+      active[--w] = incoming[--j];
+  }
 }
 
 bool hasWork(uint32_t k, const RasterScratch& scratch) {

@@ -120,6 +120,7 @@ struct RasterScratch {
   std::vector<RasterEdge> bucketed;   // the same, grouped by first sample line (count, prefix sum, fill)
   std::vector<uint32_t> bucketStart;  // sample lines + 1 offsets into bucketed
   std::vector<RasterEdge> active;     // edges crossing the current sample line, sorted by x
+  std::vector<RasterEdge> incoming;   // edges whose first sample line is the current one
   // Exact coverage (pixel units: u = (x - x0) / p, v = (y - y0) / p).
   std::vector<CoverageEdge> coverageEdges;     // non-horizontal edges overlapping the grid's rows
   std::vector<CoverageEdge> coverageBucketed;  // the same, grouped by first row
