@@ -413,6 +413,19 @@ std::vector<LayerContours> randomLayers(std::mt19937& rng) {
   return layers;
 }
 
+// Every pixel of the binary mask m of `sets` on a unit grid is the brute-force winding's, and m's runs
+// describe its pixels.
+void expectBruteForcePixels(const std::vector<ContourSet>& sets, const PixelGrid& grid, const MaskImage& m,
+                            int trial) {
+  for (uint32_t j = 0; j < grid.height; ++j) {
+    for (uint32_t i = 0; i < grid.width; ++i) {
+      const bool solid = bruteWinding(sets, i + 0.5, j + 0.5) > 0;
+      ASSERT_EQ(at(m, i, j), solid ? 255 : 0) << "trial " << trial << " pixel " << i << "," << j;
+    }
+  }
+  expectRunsDescribePixels(m);
+}
+
 TEST(RasterBinary, MatchesBruteForceWindingOnRandomLoops) {
   std::mt19937 rng(12345);
   const PixelGrid grid = unitGrid(24, 22);
@@ -423,13 +436,8 @@ TEST(RasterBinary, MatchesBruteForceWindingOnRandomLoops) {
     const std::vector<LayerContours> layers = randomLayers(rng);
     const std::vector<ContourSet> sets = {{&layers[0], 1}, {&layers[1], 1}, {&layers[2], -1}};
     rasterizeBinary(sets, grid, m, scratch);
-    for (uint32_t j = 0; j < grid.height; ++j) {
-      for (uint32_t i = 0; i < grid.width; ++i) {
-        const bool solid = bruteWinding(sets, i + 0.5, j + 0.5) > 0;
-        ASSERT_EQ(at(m, i, j), solid ? 255 : 0) << "trial " << trial << " pixel " << i << "," << j;
-      }
-    }
-    expectRunsDescribePixels(m);
+    expectBruteForcePixels(sets, grid, m, trial);
+    if (HasFatalFailure()) return;
     litTotal += countLitPixels(m);
   }
   EXPECT_GT(litTotal, 200u * 24 * 22 / 10);  // the fixtures are not trivially empty
@@ -455,13 +463,8 @@ TEST(RasterBinary, ManyEdgesStartingOnOneLineMatchBruteForce) {
     const LayerContours layer = makeLayer(loops);
     const std::vector<ContourSet> sets = {{&layer, 1}};
     rasterizeBinary(sets, grid, m, scratch);
-    for (uint32_t j = 0; j < grid.height; ++j) {
-      for (uint32_t i = 0; i < grid.width; ++i) {
-        const bool solid = bruteWinding(sets, i + 0.5, j + 0.5) > 0;
-        ASSERT_EQ(at(m, i, j), solid ? 255 : 0) << "trial " << trial << " pixel " << i << "," << j;
-      }
-    }
-    expectRunsDescribePixels(m);
+    expectBruteForcePixels(sets, grid, m, trial);
+    if (HasFatalFailure()) return;
   }
 }
 
