@@ -8,6 +8,7 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev libtinyexr-dev libpolyclipping-dev
   openexr libopenvdb-tools
   openmpi-bin libopenmpi-dev
+  python3-matplotlib
 )
 missing=()
 for p in "${packages[@]}"; do
