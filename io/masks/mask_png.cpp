@@ -8,8 +8,8 @@
 #include <memory>
 #include <span>
 
+#include <libdeflate.h>
 #include <spng.h>
-#include <zlib.h>
 
 #include "io/errors.h"
 
@@ -41,8 +41,7 @@ void appendChunk(std::vector<uint8_t>& out, const char type[4], std::span<const 
   putBigEndian32(&out[at], static_cast<uint32_t>(data.size()));
   std::memcpy(&out[at + 4], type, 4);
   if (!data.empty()) std::memcpy(&out[at + 8], data.data(), data.size());
-  const uLong crc = crc32_z(0, &out[at + 4], 4 + data.size());
-  putBigEndian32(&out[at + 8 + data.size()], static_cast<uint32_t>(crc));
+  putBigEndian32(&out[at + 8 + data.size()], libdeflate_crc32(0, &out[at + 4], 4 + data.size()));
 }
 
 }  // namespace
@@ -180,7 +179,7 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
   out.resize(end + 8);  // the Adler-32, then the CRC
   putBigEndian32(&out[end], static_cast<uint32_t>((adlerB << 16) | adlerA));
   end += 4;
-  putBigEndian32(&out[end], static_cast<uint32_t>(crc32_z(0, &out[idat + 4], 4 + dataSize)));
+  putBigEndian32(&out[end], libdeflate_crc32(0, &out[idat + 4], 4 + dataSize));
   out.resize(end + 4);
   appendChunk(out, "IEND", {});
 }

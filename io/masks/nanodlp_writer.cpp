@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include <zlib.h>
+#include <libdeflate.h>
 #include <nlohmann/json.hpp>
 
 #include "io/errors.h"
@@ -65,7 +65,7 @@ class NanoDlpSink final : public EncodingMaskSink {
                    MaskEncodeScratch& scratch) const override {
     checkMaskLayerSize(mask, job_.grid, file_.finalPath(), index);
     encodeMaskPng(mask, out.bytes, scratch.deflate);
-    out.crc32 = static_cast<uint32_t>(crc32_z(0, out.bytes.data(), out.bytes.size()));
+    out.crc32 = libdeflate_crc32(0, out.bytes.data(), out.bytes.size());
     out.text = infoJson(nanoDlpLayerInfo(mask, job_.grid.pixel)).dump();
   }
 

@@ -14,7 +14,7 @@
 #include <map>
 #include <vector>
 
-#include <zlib.h>
+#include <libdeflate.h>
 
 #include "io/errors.h"
 #include "io/masks/mask_png.h"
@@ -87,7 +87,7 @@ class Sl1Sink final : public EncodingMaskSink {
                    MaskEncodeScratch& scratch) const override {
     checkMaskLayerSize(mask, job_.grid, file_.finalPath(), index);
     encodeMaskPng(mask, out.bytes, scratch.deflate);
-    out.crc32 = static_cast<uint32_t>(crc32_z(0, out.bytes.data(), out.bytes.size()));
+    out.crc32 = libdeflate_crc32(0, out.bytes.data(), out.bytes.size());
   }
 
   void writeEncodedLayer(uint32_t index, double /*z*/, const EncodedMaskLayer& layer) override {
