@@ -500,7 +500,11 @@ size_t RunDeflater::writeStream(size_t stream, std::vector<uint8_t>& out, size_t
     planBlock(counts_, rowIndex, code, plan_->code, static_cast<uint32_t>(streamEnds_.size()));
     prepareTables(plan_->code, rowIndex, copyDistance_, plan_->tables);
   }
-  out.resize(at + streamBound(stream));
+  // One stream: its planned size is exact (plus the coder's 8 bytes of slack), so `out` is not grown and
+  // zero-filled to the worst case, about 5x larger, for every image.
+  const size_t room =
+      streamEnds_.size() == 1 ? static_cast<size_t>((plan_->code.bits + 7) / 8) + 8 : streamBound(stream);
+  out.resize(at + room);
   const size_t begin = stream == 0 ? 0 : streamEnds_[stream - 1];
   return writeCodedBlock(plan_->code, plan_->tables, {tokens_.data() + begin, streamEnds_[stream] - begin},
                          out.data() + at);
