@@ -498,6 +498,59 @@ TEST(RasterBinary, RunsOfMirroredAndPortraitGridsDescribeTheirPixels) {
   EXPECT_GT(multiRunRows, 500u);
 }
 
+TEST(RasterBinary, ConsecutiveLayersInOneImageEqualFreshImages) {
+  // A binary mask rasterized into the image that holds the previous layer's mask rewrites only the rows
+  // whose runs changed. Slowly moving shapes (most rows repeat, some change, some go dark, whole layers
+  // go empty), mirrored and portrait grids, an anti-aliased layer and a grid of another size between
+  // them: every mask equals the same layer rasterized into a fresh image, pixel for pixel, with the same
+  // runs.
+  RasterScratch scratch;
+  MaskImage m;
+  std::size_t repeatedRows = 0, changedRows = 0;
+  MaskImage previous;  // the last binary mask, for counting repeated rows
+  for (int k = 0; k < 120; ++k) {
+    const double t = 0.013 * k;
+    std::vector<Loop> loops = {circle(3.0 + t, 3.1, 1.9 - 0.5 * t, 120), reversed(circle(3.1, 3.0, 0.6, 40))};
+    if (k % 9 < 5) loops.push_back(rect(0.4, 4.6 + 0.02 * k, 2.2 + t, 5.7));  // comes and goes
+    const LayerContours layer = makeLayer(k % 17 == 16 ? std::vector<Loop>{} : loops);
+    const std::vector<ContourSet> sets = {{&layer, 1}};
+    PixelGrid grid = makeGrid(0.05, -0.03, 0.1, 66, 62);
+    grid.transposed = k / 40 == 1;
+    grid.mirrorX = k / 20 % 2 == 1;
+    grid.mirrorY = k / 30 % 2 == 1;
+    if (k % 23 == 22) {  // something else in between: coverage, then a smaller grid
+      MaskImage fresh;
+      rasterizeCoverage(sets, grid, m, scratch);
+      rasterizeCoverage(sets, grid, fresh, scratch);
+      ASSERT_EQ(m.pixels, fresh.pixels) << "layer " << k;
+      rasterizeBinary(sets, makeGrid(0, 0, 0.2, 33, 31), m, scratch);
+      previous = MaskImage{};
+      continue;
+    }
+    rasterizeBinary(sets, grid, m, scratch);
+    const MaskImage fresh = binary(sets, grid);
+    ASSERT_EQ(m.pixels, fresh.pixels) << "layer " << k;
+    ASSERT_EQ(m.runs, fresh.runs) << "layer " << k;
+    ASSERT_EQ(m.rowRuns, fresh.rowRuns) << "layer " << k;
+    ASSERT_EQ(m.litBegin, fresh.litBegin) << "layer " << k;
+    ASSERT_EQ(m.litEnd, fresh.litEnd) << "layer " << k;
+    expectRunsDescribePixels(m);
+    if (previous.rowRuns.size() == m.rowRuns.size()) {
+      for (uint32_t r = 0; r < grid.height; ++r) {
+        if (m.rowRuns[2 * r + 1] == 0) continue;
+        const auto runsOf = [r](const MaskImage& image) {
+          const auto begin = image.runs.begin() + 2 * std::ptrdiff_t{image.rowRuns[2 * r]};
+          return std::vector<uint32_t>(begin, begin + 2 * std::ptrdiff_t{image.rowRuns[2 * r + 1]});
+        };
+        (runsOf(m) == runsOf(previous) ? repeatedRows : changedRows) += 1;
+      }
+    }
+    previous = m;
+  }
+  EXPECT_GT(repeatedRows, 1000u);  // the fixture exercises both kinds of rows
+  EXPECT_GT(changedRows, 100u);
+}
+
 TEST(RasterCoverage, MatchesExactClippingOnRandomLoops) {
   // Self-intersecting loops in three sets (+1, +1, -1): vertices inside and on pixel borders, crossings,
   // coincident edges, winding counts from -2 to 3; mirrored and not, on a reused image and scratch.

@@ -610,8 +610,31 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
   assert(usableGrid(grid));
   if (litPixels) *litPixels = 0;
   const uint32_t width = grid.width, height = grid.height;
-  prepareImage(grid, out);  // with known extents only the previous image's lit spans are cleared
+  // With the previous binary mask of this size and its runs in `out`, rows are updated in place: a row
+  // whose runs are unchanged (most rows of consecutive thin layers) is not written at all, a changed
+  // row is cleared from its old runs and lit from its new ones, and rows left dark are cleared at the
+  // end. Otherwise the image is cleared first (only its lit spans when it has extents).
+  const bool update = width > 0 && height > 0 && usableGrid(grid) && out.width == width &&
+                      out.height == height && out.hasRuns() &&
+                      out.pixels.size() == static_cast<std::size_t>(width) * height;
+  std::vector<uint32_t>& oldRuns = scratch.previousRuns;
+  std::vector<uint32_t>& oldRowRuns = scratch.previousRowRuns;
+  if (update) {
+    oldRuns.swap(out.runs);
+    oldRowRuns.swap(out.rowRuns);
+    out.runs.clear();
+    std::fill(out.litBegin.begin(), out.litBegin.end(), width);
+    std::fill(out.litEnd.begin(), out.litEnd.end(), 0u);
+  } else {
+    prepareImage(grid, out);
+  }
   if (width == 0 || height == 0 || !usableGrid(grid)) return;
+  const auto clearOldRuns = [&](uint32_t r, uint8_t* row) {
+    const uint32_t* run = oldRuns.data() + 2 * std::size_t{oldRowRuns[2 * r]};
+    for (uint32_t k = 0; k < oldRowRuns[2 * r + 1]; ++k)
+      std::memset(row + run[2 * k], 0, run[2 * k + 1] - run[2 * k]);
+    oldRowRuns[2 * r + 1] = 0;  // done with
+  };
 
   out.rowRuns.assign(std::size_t{2} * height, 0);
   std::vector<uint32_t>& runs = out.runs;
@@ -626,10 +649,8 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
       const uint32_t ia = firstSampleAtOrAbove(xa, grid.x0, grid.pixel, width);
       const uint32_t ib = firstSampleAtOrAbove(xb, grid.x0, grid.pixel, width);
       if (ia >= ib) return;
-      const uint32_t a = grid.mirrorX ? width - ib : ia, b = grid.mirrorX ? width - ia : ib;
-      std::memset(row + a, 255, b - a);
-      runs.push_back(a);
-      runs.push_back(b);
+      runs.push_back(grid.mirrorX ? width - ib : ia);
+      runs.push_back(grid.mirrorX ? width - ia : ib);
       if (litPixels) *litPixels += ib - ia;
     });
     if (runs.size() == first) continue;
@@ -652,10 +673,26 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
       }
     }
     runs.resize(kept + 2);
+    const auto count = static_cast<uint32_t>((runs.size() - first) / 2);
     out.rowRuns[2 * r] = static_cast<uint32_t>(first / 2);
-    out.rowRuns[2 * r + 1] = static_cast<uint32_t>((runs.size() - first) / 2);
+    out.rowRuns[2 * r + 1] = count;
     out.litBegin[r] = runs[first];
     out.litEnd[r] = runs.back();
+    if (update) {
+      const uint32_t* old = oldRuns.data() + 2 * std::size_t{oldRowRuns[2 * r]};
+      if (oldRowRuns[2 * r + 1] == count && std::equal(runs.begin() + first, runs.end(), old)) {
+        oldRowRuns[2 * r + 1] = 0;  // the row already holds these pixels
+        continue;
+      }
+      clearOldRuns(r, row);
+    }
+    for (std::size_t p = first; p < runs.size(); p += 2)
+      std::memset(row + runs[p], 255, runs[p + 1] - runs[p]);
+  }
+  if (update) {  // rows lit before and dark now
+    for (uint32_t r = 0; r < height; ++r)
+      if (oldRowRuns[2 * r + 1] != 0)
+        clearOldRuns(r, out.pixels.data() + static_cast<std::size_t>(r) * width);
   }
 }
 

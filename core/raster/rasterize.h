@@ -121,6 +121,7 @@ struct RasterScratch {
   std::vector<uint32_t> bucketStart;  // sample lines + 1 offsets into bucketed
   std::vector<RasterEdge> active;     // edges crossing the current sample line, sorted by x
   std::vector<RasterEdge> incoming;   // edges whose first sample line is the current one
+  std::vector<uint32_t> previousRuns, previousRowRuns;  // the image's runs before this call (binary)
   // Exact coverage (pixel units: u = (x - x0) / p, v = (y - y0) / p).
   std::vector<CoverageEdge> coverageEdges;     // non-horizontal edges overlapping the grid's rows
   std::vector<CoverageEdge> coverageBucketed;  // the same, grouped by first row
@@ -154,7 +155,9 @@ struct CoverageTransfer {
 
 // Binary mask of the sets' positive-winding region. Every set's layer is non-null, sign is +1 or -1;
 // grid.pixel > 0 and grid.width * grid.height fits in memory. `out` is resized to width x height and
-// every pixel is written (255 solid, 0 empty). O(edges + crossings log + width*height) per call.
+// holds the mask (255 solid, 0 empty). O(edges + crossings log + width*height) per call; when `out`
+// already holds a binary mask of the same size with its runs (the previous layer), only the rows whose
+// runs changed are rewritten: O(edges + crossings log + height + changed rows' pixels).
 // When litPixels is given it receives the number of lit pixels (counted from the runs, no extra pass).
 void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, MaskImage& out,
                      RasterScratch& scratch, uint64_t* litPixels = nullptr);
