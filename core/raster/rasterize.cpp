@@ -574,6 +574,14 @@ void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32
   sortNearlySorted(scratch.spans, [](const CellSpan& s) { return s.begin; });
 }
 
+// Sets the pixels of stored row r's runs (MaskImage::runs, rowRuns) to zero.
+void clearRowRuns(uint8_t* row, const std::vector<uint32_t>& runs, const std::vector<uint32_t>& rowRuns,
+                  uint32_t r) {
+  const uint32_t* run = runs.data() + 2 * std::size_t{rowRuns[2 * r]};
+  for (uint32_t k = 0; k < rowRuns[2 * r + 1]; ++k)
+    std::memset(row + run[2 * k], 0, run[2 * k + 1] - run[2 * k]);
+}
+
 // Clears `out` for a new layer of `grid`: only the previous image's lit spans when it has extents.
 // Leaves every row dark with empty extents.
 void prepareImage(const PixelGrid& grid, MaskImage& out) {
@@ -590,9 +598,7 @@ void prepareImage(const PixelGrid& grid, MaskImage& out) {
   for (uint32_t r = 0; r < height; ++r) {
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     if (runs) {
-      const uint32_t* run = out.runs.data() + 2 * std::size_t{out.rowRuns[2 * r]};
-      for (uint32_t k = 0; k < out.rowRuns[2 * r + 1]; ++k)
-        std::memset(row + run[2 * k], 0, run[2 * k + 1] - run[2 * k]);
+      clearRowRuns(row, out.runs, out.rowRuns, r);
     } else if (reuse && out.litBegin[r] < out.litEnd[r]) {
       std::memset(row + out.litBegin[r], 0, out.litEnd[r] - out.litBegin[r]);
     }
@@ -630,9 +636,7 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
   }
   if (width == 0 || height == 0 || !usableGrid(grid)) return;
   const auto clearOldRuns = [&](uint32_t r, uint8_t* row) {
-    const uint32_t* run = oldRuns.data() + 2 * std::size_t{oldRowRuns[2 * r]};
-    for (uint32_t k = 0; k < oldRowRuns[2 * r + 1]; ++k)
-      std::memset(row + run[2 * k], 0, run[2 * k + 1] - run[2 * k]);
+    clearRowRuns(row, oldRuns, oldRowRuns, r);
     oldRowRuns[2 * r + 1] = 0;  // done with
   };
 
