@@ -14,6 +14,8 @@
 #include <string>
 #include <type_traits>
 
+#include <libdeflate.h>
+
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wconversion"
 #pragma GCC diagnostic ignored "-Wshadow"
@@ -23,7 +25,6 @@
 #include <openvdb/io/GridDescriptor.h>
 #include <openvdb/io/io.h>
 #include <openvdb/openvdb.h>
-#include <zlib.h>
 #pragma GCC diagnostic pop
 
 #include "io/errors.h"
@@ -244,7 +245,7 @@ class VdbSink final : public EncodingMaskSink {
         if constexpr (!kIsMask) std::memcpy(out.data() + at + 12, rows, 64);
       }
     }
-    encoded.crc32 = static_cast<uint32_t>(crc32_z(0, out.data(), out.size()));  // for the file's UUID
+    encoded.crc32 = libdeflate_crc32(0, out.data(), out.size());  // for the file's UUID
   }
 
   void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer) override {
