@@ -468,6 +468,42 @@ TEST(RasterBinary, ManyEdgesStartingOnOneLineMatchBruteForce) {
   }
 }
 
+TEST(RasterBinary, LongChainsOfShortEdgesMatchBruteForce) {
+  // Finely sampled outlines like the slices of a mesh at 1 um: hundreds of edges per loop, each
+  // crossing at most a line or two, so that an edge ending on a sample line hands its place in the
+  // active list to the next edge of its chain. Wobbly rings (outer loop and reversed hole), with
+  // zig-zags whose teeth start and end between and on sample lines, some vertices exactly on sample
+  // lines, and overlapping copies, against the brute-force winding at every pixel centre.
+  std::mt19937 rng(2718);
+  std::uniform_real_distribution<double> wobble(-0.9, 0.9), centre(12.0, 28.0);
+  const PixelGrid grid = unitGrid(40, 36);
+  RasterScratch scratch;
+  MaskImage m;
+  for (int trial = 0; trial < 40; ++trial) {
+    std::vector<Loop> loops;
+    for (int ring = 0; ring < 3; ++ring) {
+      const double cx = centre(rng), cy = centre(rng), r = 6.0 + 3.0 * ring;
+      const int n = 200 + 150 * ring;
+      Loop outer, inner;
+      for (int k = 0; k < n; ++k) {
+        const double t = 2.0 * std::numbers::pi * k / n;
+        const double tooth = (k % 2 == 0 ? 0.35 : -0.35) * (trial % 3);  // zig-zag across the lines
+        Point2d p{cx + (r + wobble(rng) * 0.3 + tooth) * std::cos(t),
+                  cy + (r + wobble(rng) * 0.3) * std::sin(t)};
+        if (k % 9 == 0) p.y = std::round(p.y - 0.5) + 0.5;  // on a sample line
+        outer.push_back(p);
+        inner.push_back({cx + 0.5 * (p.x - cx), cy + 0.5 * (p.y - cy)});
+      }
+      loops.push_back(outer);
+      if (ring != 1) loops.push_back(reversed(inner));
+    }
+    const LayerContours layer = makeLayer(loops);
+    const std::vector<ContourSet> sets = {{&layer, 1}};
+    rasterizeBinary(sets, grid, m, scratch);
+    expectBruteForcePixels(sets, grid, m, trial);
+    if (HasFatalFailure()) return;
+  }
+}
 TEST(RasterBinary, RunsOfMirroredAndPortraitGridsDescribeTheirPixels) {
   // Rows of several runs (random self-intersecting loops), mirrored and transposed grids, one image and
   // scratch reused throughout (the next layer is cleared from the previous layer's runs): every mask is

@@ -25,10 +25,11 @@ double samplePosition(double origin, double pitch, uint32_t k) {
   return origin + (static_cast<double>(k) + 0.5) * pitch;
 }
 
-// Smallest k in [0, count] with samplePosition(k) >= v (count when there is none). The division only
-// guesses; the answer is settled with the same expression every caller uses for the sample position.
-uint32_t firstSampleAtOrAbove(double v, double origin, double pitch, uint32_t count) {
-  const double guess = std::ceil((v - origin) / pitch - 0.5);
+// Smallest k in [0, count] with samplePosition(k) >= v (count when there is none). The product with
+// 1 / pitch only guesses; the answer is settled with the same expression every caller uses for the
+// sample position.
+uint32_t firstSampleAtOrAbove(double v, double origin, double pitch, double inversePitch, uint32_t count) {
+  const double guess = std::ceil((v - origin) * inversePitch - 0.5);
   uint32_t k = 0;
   if (guess >= static_cast<double>(count)) {
     k = count;
@@ -83,34 +84,75 @@ void bucketByFirst(const std::vector<Edge>& edges, uint32_t count, First first, 
   start[0] = 0;
 }
 
+constexpr uint32_t kNoEdge = std::numeric_limits<uint32_t>::max();
+
+// Links the edges of one loop, edges[begin, end) in loop order, into chains: where an edge ends at
+// sample line k and the next edge of the loop running the same way (upwards: the next one; downwards:
+// the previous one) starts at k, that edge takes its place in the active list (RasterEdge::next).
+// Consecutive edges of a loop meet, so the one that follows sits where the one before was: the active
+// list stays in order from line to line, where appending it would have moved it through the list. The
+// links are only a placement: every edge is still active on exactly the lines it crosses.
+void linkChains(std::vector<RasterEdge>& edges, std::size_t begin, std::size_t end, int32_t sign,
+                std::vector<uint8_t>& linked) {
+  for (std::size_t m = begin; m < end; ++m) {
+    const std::size_t n = m + 1 == end ? begin : m + 1;
+    RasterEdge& p = edges[m];
+    RasterEdge& q = edges[n];
+    if (m == n || p.winding != q.winding) continue;
+    const bool upward = p.winding == -sign;
+    RasterEdge& lower = upward ? p : q;
+    RasterEdge& upper = upward ? q : p;
+    if (upper.first != lower.end) continue;
+    lower.next = static_cast<uint32_t>(upward ? n : m);
+    linked[upward ? n : m] = 1;
+  }
+}
+
 // Collects the edges of all closed, finite loops that cross at least one of `count` sample lines
-// origin + (k + 1/2) pitch, then groups them by first line into scratch.bucketed / bucketStart.
+// origin + (k + 1/2) pitch, links them into chains (linkChains), then groups the chains' first edges
+// by first line into scratch.bucketed / bucketStart.
 void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitch, uint32_t count,
                     bool transposed, RasterScratch& scratch) {
   std::vector<RasterEdge>& edges = scratch.edges;
+  std::vector<uint8_t>& linked = scratch.linked;
   edges.clear();
+  linked.clear();
+  const double inversePitch = 1.0 / pitch;
+  std::vector<uint32_t>& lineOf = scratch.lineOfPoint;
   forEachClosedFiniteLoop(sets, transposed, [&](std::span<const Point2d> loop, int32_t sign) {
     const std::size_t n = loop.size();
+    const std::size_t begin = edges.size();
+    // The first sample line at or above each point: an edge crosses the lines from its lower end's to
+    // its upper end's (none when they are equal, as for a horizontal edge: the half-open rule).
+    lineOf.resize(n);
+    for (std::size_t i = 0; i < n; ++i)
+      lineOf[i] = firstSampleAtOrAbove(gridPoint(loop[i], transposed).y, origin, pitch, inversePitch, count);
     for (std::size_t i = 0; i < n; ++i) {
+      const std::size_t i1 = i + 1 == n ? 0 : i + 1;
+      if (lineOf[i] == lineOf[i1]) continue;
       const Point2d a = gridPoint(loop[i], transposed);
-      const Point2d b = gridPoint(loop[i + 1 == n ? 0 : i + 1], transposed);
-      if (a.y == b.y) continue;  // horizontal: crosses no sample line under the half-open rule
-      const bool upward = a.y < b.y;
+      const Point2d b = gridPoint(loop[i1], transposed);
+      const bool upward = a.y < b.y;  // the lines differ, so the heights do, in the same order
       const Point2d lo = upward ? a : b;
       const Point2d hi = upward ? b : a;
-      const uint32_t first = firstSampleAtOrAbove(lo.y, origin, pitch, count);
-      const uint32_t end = firstSampleAtOrAbove(hi.y, origin, pitch, count);
-      if (first >= end) continue;
+      const uint32_t first = upward ? lineOf[i] : lineOf[i1];
+      const uint32_t end = upward ? lineOf[i1] : lineOf[i];
       double slope = (hi.x - lo.x) / (hi.y - lo.y);
       if (!std::isfinite(slope)) slope = 0.0;  // dy is so small that any x of the edge is as good
       // A CCW outer loop runs downwards on its left side: crossing it left to right enters the solid.
       const int32_t winding = upward ? -sign : sign;
-      edges.push_back(RasterEdge{0.0, lo.x, lo.y, slope, first, end, winding});
+      edges.push_back(RasterEdge{0.0, lo.x, lo.y, slope, first, end, winding, kNoEdge});
     }
+    linked.resize(edges.size(), 0);
+    linkChains(edges, begin, edges.size(), sign, linked);
   });
 
+  std::vector<RasterEdge>& heads = scratch.heads;
+  heads.clear();
+  for (std::size_t m = 0; m < edges.size(); ++m)
+    if (linked[m] == 0) heads.push_back(edges[m]);
   bucketByFirst(
-      edges, count, [](const RasterEdge& e) { return e.first; }, scratch.bucketed, scratch.bucketStart);
+      heads, count, [](const RasterEdge& e) { return e.first; }, scratch.bucketed, scratch.bucketStart);
 
   scratch.active.clear();
   scratch.active.reserve(edges.size());
@@ -138,17 +180,23 @@ void sortByX(std::vector<RasterEdge>& edges) {
   }
 }
 
-// Moves the active edge table to sample line k at height y: drops edges that ended, adds the edges whose
-// first line is k, computes every crossing and sorts by x. The edges that go on are nearly sorted already
-// (insertion sort); a few new ones are appended and moved into place by it, many (the parts of a plate)
-// are sorted on their own and merged in, so that they do not make the whole line's order be sorted
-// again. Edges of equal x may come in any order: the runs sum their windings first.
+// Moves the active edge table to sample line k at height y: an edge that ended hands its place to the
+// next edge of its chain (or leaves), the chains starting on line k are added, every crossing is computed
+// and the list sorted by x. The list stays nearly sorted from line to line (insertion sort); a few new
+// chains are appended and moved into place by it, many (the parts of a plate) are sorted on their own
+// and merged in, so that they do not make the whole line's order be sorted again. Edges of equal x may
+// come in any order: the runs sum their windings first.
 void advanceTo(uint32_t k, double y, RasterScratch& scratch) {
   std::vector<RasterEdge>& active = scratch.active;
+  const RasterEdge* edges = scratch.edges.data();
   std::size_t kept = 0;
   for (std::size_t i = 0; i < active.size(); ++i) {
-    if (active[i].end <= k) continue;
     RasterEdge e = active[i];
+    if (e.end <= k) {
+      if (e.next == kNoEdge) continue;
+      e = edges[e.next];
+      assert(e.first == k);
+    }
     e.x = e.xLow + (y - e.yLow) * e.slope;
     active[kept++] = e;
   }
@@ -643,6 +691,7 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
   out.rowRuns.assign(std::size_t{2} * height, 0);
   std::vector<uint32_t>& runs = out.runs;
   buildEdgeTable(sets, grid.y0, grid.pixel, height, grid.transposed, scratch);
+  const double inversePixel = 1.0 / grid.pixel;
   for (uint32_t j = 0; j < height; ++j) {
     if (!hasWork(j, scratch)) continue;
     const uint32_t r = grid.mirrorY ? height - 1 - j : j;
@@ -650,8 +699,8 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
     advanceTo(j, samplePosition(grid.y0, grid.pixel, j), scratch);
     const std::size_t first = runs.size();
     forEachSolidRun(scratch.active, [&](double xa, double xb) {
-      const uint32_t ia = firstSampleAtOrAbove(xa, grid.x0, grid.pixel, width);
-      const uint32_t ib = firstSampleAtOrAbove(xb, grid.x0, grid.pixel, width);
+      const uint32_t ia = firstSampleAtOrAbove(xa, grid.x0, grid.pixel, inversePixel, width);
+      const uint32_t ib = firstSampleAtOrAbove(xb, grid.x0, grid.pixel, inversePixel, width);
       if (ia >= ib) return;
       runs.push_back(grid.mirrorX ? width - ib : ia);
       runs.push_back(grid.mirrorX ? width - ia : ib);

@@ -111,17 +111,21 @@ struct RasterEdge {
   uint32_t first;     // first sample line crossed
   uint32_t end;       // one past the last sample line crossed
   int32_t winding;    // change of the winding count when crossing it left to right
+  uint32_t next;      // index in RasterScratch::edges of the edge taking its place at line `end`, or none
 };
 
 // Reusable buffers of the rasterizers (one per thread). Nothing needs clearing between calls; memory
 // depends on the layer's edge count and the grid size, never on the number of layers.
 struct RasterScratch {
   std::vector<RasterEdge> edges;      // edges crossing the grid's sample lines, in input order
-  std::vector<RasterEdge> bucketed;   // the same, grouped by first sample line (count, prefix sum, fill)
+  std::vector<RasterEdge> heads;      // the edges no other edge hands its place on to
+  std::vector<RasterEdge> bucketed;   // heads grouped by first sample line (count, prefix sum, fill)
   std::vector<uint32_t> bucketStart;  // sample lines + 1 offsets into bucketed
   std::vector<RasterEdge> active;     // edges crossing the current sample line, sorted by x
   std::vector<RasterEdge> incoming;   // edges whose first sample line is the current one
   std::vector<uint32_t> previousRuns, previousRowRuns;  // the image's runs before this call (binary)
+  std::vector<uint32_t> lineOfPoint;                    // first sample line at or above each point of a loop
+  std::vector<uint8_t> linked;  // per edge: 1 where an edge before it in its chain hands on to it
   // Exact coverage (pixel units: u = (x - x0) / p, v = (y - y0) / p).
   std::vector<CoverageEdge> coverageEdges;     // non-horizontal edges overlapping the grid's rows
   std::vector<CoverageEdge> coverageBucketed;  // the same, grouped by first row
