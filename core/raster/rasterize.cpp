@@ -630,6 +630,29 @@ void clearRowRuns(uint8_t* row, const std::vector<uint32_t>& runs, const std::ve
     std::memset(row + run[2 * k], 0, run[2 * k + 1] - run[2 * k]);
 }
 
+// Turns a row lit on the runs `from` into one lit on the runs `to` (both increasing [begin, end) pairs,
+// none empty, none touching the next): only the pixels lit in one and not in the other are written,
+// so a row whose outline moved by a pixel costs a few bytes, not its runs twice.
+void changeRowRuns(uint8_t* row, std::span<const uint32_t> from, std::span<const uint32_t> to) {
+  constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
+  std::size_t i = 0, j = 0;
+  bool inFrom = false, inTo = false;
+  uint32_t at = 0;
+  while (i < from.size() || j < to.size()) {
+    const uint32_t x = std::min(i < from.size() ? from[i] : kNone, j < to.size() ? to[j] : kNone);
+    if (inFrom != inTo) std::memset(row + at, inTo ? 255 : 0, x - at);
+    if (i < from.size() && from[i] == x) {
+      inFrom = !inFrom;
+      ++i;
+    }
+    if (j < to.size() && to[j] == x) {
+      inTo = !inTo;
+      ++j;
+    }
+    at = x;
+  }
+}
+
 // Clears `out` for a new layer of `grid`: only the previous image's lit spans when it has extents.
 // Leaves every row dark with empty extents.
 void prepareImage(const PixelGrid& grid, MaskImage& out) {
@@ -666,8 +689,9 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
   const uint32_t width = grid.width, height = grid.height;
   // With the previous binary mask of this size and its runs in `out`, rows are updated in place: a row
   // whose runs are unchanged (most rows of consecutive thin layers) is not written at all, a changed
-  // row is cleared from its old runs and lit from its new ones, and rows left dark are cleared at the
-  // end. Otherwise the image is cleared first (only its lit spans when it has extents).
+  // row has only the pixels between its old and new run ends written (changeRowRuns), and rows left
+  // dark are cleared at the end. Otherwise the image is cleared first (only its lit spans when it has
+  // extents).
   const bool update = width > 0 && height > 0 && usableGrid(grid) && out.width == width &&
                       out.height == height && out.hasRuns() &&
                       out.pixels.size() == static_cast<std::size_t>(width) * height;
@@ -733,11 +757,11 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
     out.litEnd[r] = runs.back();
     if (update) {
       const uint32_t* old = oldRuns.data() + 2 * std::size_t{oldRowRuns[2 * r]};
-      if (oldRowRuns[2 * r + 1] == count && std::equal(runs.begin() + first, runs.end(), old)) {
-        oldRowRuns[2 * r + 1] = 0;  // the row already holds these pixels
-        continue;
-      }
-      clearOldRuns(r, row);
+      const uint32_t oldCount = oldRowRuns[2 * r + 1];
+      oldRowRuns[2 * r + 1] = 0;  // done with
+      if (oldCount != count || !std::equal(runs.begin() + first, runs.end(), old))
+        changeRowRuns(row, {old, 2 * std::size_t{oldCount}}, {runs.data() + first, 2 * std::size_t{count}});
+      continue;
     }
     for (std::size_t p = first; p < runs.size(); p += 2)
       std::memset(row + runs[p], 255, runs[p + 1] - runs[p]);
