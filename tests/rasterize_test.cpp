@@ -473,7 +473,7 @@ TEST(RasterBinary, LongChainsOfShortEdgesMatchBruteForce) {
   // crossing at most a line or two, so that an edge ending on a sample line hands its place in the
   // active list to the next edge of its chain. Wobbly rings (outer loop and reversed hole), with
   // zig-zags whose teeth start and end between and on sample lines, some vertices exactly on sample
-  // lines, and overlapping copies, against the brute-force winding at every pixel centre.
+  // lines, and rings overlapping each other, against the brute-force winding at every pixel centre.
   std::mt19937 rng(2718);
   std::uniform_real_distribution<double> wobble(-0.9, 0.9), centre(12.0, 28.0);
   const PixelGrid grid = unitGrid(40, 36);
