@@ -228,6 +228,37 @@ TEST_F(PlateTest, OtherConnectivityIsRefusedByNameUnlessRebuildIsAllowed) {
   EXPECT_NE(r.parts[0].topology.find("rebuilt"), std::string::npos);
 }
 
+TEST_F(PlateTest, EveryPartThatCannotBeUsedIsNamedInOneError) {
+  // Two parts of other connectivity and a missing model among good ones: one error lists all three,
+  // in job order, and nothing is written.
+  const auto part = [](const std::string& name, const std::string& model, const std::string& table) {
+    return "{\"name\": \"" + name + "\", \"model\": " + q(model) +
+           (table.empty() ? "" : ", \"template\": " + q(table)) + ", \"placement\": \"auto\"}";
+  };
+  const std::string parts = "\"parts\": [" + part("good", kCase0, alignerTable()) + "," +
+                            part("odd one", tool_test::examplePart(), alignerTable()) + "," +
+                            part("missing", (dir_ / "nowhere.stl").string(), "") + "," +
+                            part("odd two", tool_test::examplePart(), alignerTable()) + "],";
+  try {
+    runPlateJob(job("{\"printer\": \"generic-8k\", \"settings\": {\"layer_height\": 0.5}," + parts +
+                    "\"outputs\": {\"report\": \"r.json\"}}"),
+                nullptr);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("3 parts cannot be used"), std::string::npos) << what;
+    const std::size_t one = what.find("part 'odd one'"), missing = what.find("part 'missing'"),
+                      two = what.find("part 'odd two'");
+    ASSERT_NE(one, std::string::npos) << what;
+    ASSERT_NE(missing, std::string::npos) << what;
+    ASSERT_NE(two, std::string::npos) << what;
+    EXPECT_LT(one, missing);
+    EXPECT_LT(missing, two);
+    EXPECT_EQ(what.find("part 'good'"), std::string::npos) << what;
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "r.json"));
+}
+
 }  // namespace
 }  // namespace toposlice
 

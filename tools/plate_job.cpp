@@ -454,8 +454,17 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
       }
     }
   });
+  // Every part that cannot be loaded is named, in job order (one line alone, else a list).
+  std::vector<std::string> failed;
   for (std::size_t p = 0; p < count; ++p)
-    if (!errors[p].empty()) throw InputError("part '" + job.parts[p].name + "': " + errors[p]);
+    if (!errors[p].empty()) failed.push_back("part '" + job.parts[p].name + "': " + errors[p]);
+  if (failed.size() == 1) throw InputError(failed[0]);
+  if (!failed.empty()) {
+    std::string text =
+        job.sourceFile.string() + ": " + std::to_string(failed.size()) + " parts cannot be used:";
+    for (const std::string& f : failed) text += "\n  " + f;
+    throw InputError(text);
+  }
   for (const PlatePartResult& r : result.parts) {
     const bool fromTable = r.topology.starts_with("loaded from template");
     result.templateChecked += fromTable ? 1 : 0;
