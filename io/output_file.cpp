@@ -354,6 +354,14 @@ OutputTransaction* OutputTransaction::current() {
   return tCurrentTransaction;
 }
 
+OutputTransaction::Adopt::Adopt(OutputTransaction* transaction) : previous_(tCurrentTransaction) {
+  tCurrentTransaction = transaction;
+}
+
+OutputTransaction::Adopt::~Adopt() {
+  tCurrentTransaction = previous_;
+}
+
 void OutputTransaction::stage(Staged staged) {
   staged_.push_back(std::move(staged));
 }

@@ -139,6 +139,19 @@ class OutputTransaction {
   // The calling thread's current transaction, or null.
   static OutputTransaction* current();
 
+  // Makes `transaction` the calling thread's current one for the scope (work of one job handed to
+  // another thread, which opens some of its outputs there), restoring the previous one after.
+  class Adopt {
+   public:
+    explicit Adopt(OutputTransaction* transaction);
+    ~Adopt();
+    Adopt(const Adopt&) = delete;
+    Adopt& operator=(const Adopt&) = delete;
+
+   private:
+    OutputTransaction* previous_;
+  };
+
   // Moves every staged output under its final name. First every replaced entry is checked
   // (checkReplaceable) and moved aside, then each temporary is renamed into place (without overwrite,
   // refusing an existing final path atomically); any failure undoes the renames done so far and puts the

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <iterator>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <sys/resource.h>
@@ -377,6 +378,33 @@ TEST(OutputFile, CommitWritesAllBytes) {
   }
   EXPECT_EQ(readFile(dir / "f.bin"), expected);
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"f.bin"});
+}
+
+TEST(OutputFile, AnotherThreadAdoptingTheTransactionStagesItsFilesThere) {
+  // A job's outputs opened on another thread (slice jobs set their outputs up beside the topology)
+  // join the job's transaction: they appear at its commit, or never.
+  ScratchDir dir;
+  for (const bool commit : {false, true}) {
+    const fs::path path = dir / (commit ? "kept.bin" : "dropped.bin");
+    {
+      OutputTransaction transaction;
+      std::thread other([&] {
+        const OutputTransaction::Adopt use(&transaction);
+        EXPECT_EQ(OutputTransaction::current(), &transaction);
+        OutputFile file(path, false);
+        file.write("abc", 3);
+        file.commit();  // staged in the transaction, not yet in place
+      });
+      other.join();
+      EXPECT_EQ(OutputTransaction::current(), &transaction);
+      EXPECT_FALSE(fs::exists(path));
+      ASSERT_EQ(transaction.staged().size(), 1u);
+      if (commit) transaction.commit();
+    }
+    EXPECT_EQ(fs::exists(path), commit);
+  }
+  EXPECT_EQ(dir.entries(), std::vector<std::string>{"kept.bin"});
+  EXPECT_EQ(OutputTransaction::current(), nullptr);
 }
 
 TEST(OutputFile, DestructorRemovesTemporary) {

@@ -562,67 +562,78 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     result.flipped = true;
   }
 
-  start = std::chrono::steady_clock::now();
+  // The topology (weld and adjacency, or the template check) and the outputs' set-up (planes, files,
+  // the printer files' thumbnails) need nothing of each other: they run side by side. A topology error
+  // is still the one reported when both fail, as when they ran one after the other.
   const SliceMethod method = options.slice.method;
   std::vector<int32_t> built;
-  std::span<const int32_t> adjacency = modelTopology(model, soup, templateTable, options, result, built);
-  // Features are separate meshes with their own tables; the template's table is never touched.
+  std::span<const int32_t> adjacency;
   std::vector<std::vector<int32_t>> featureTables(features.size());
-  if (method == SliceMethod::SelfReuse)
-    for (std::size_t i = 0; i < features.size(); ++i) buildTable(features[i], featureTables[i]);
-  result.topologySeconds = secondsSince(start);
-
-  std::string error;
-  const std::vector<double> planes =
-      makePlanes(options.planes, result.bounds.min.z, result.bounds.max.z, error);
-  if (!error.empty()) throw InputError(model.string() + ": " + error);
-  checkPlanesCutModel(model, planes, result, features, options, result.warnings);
-
-  ContourJob job;
-  job.name = model.stem().string();
-  for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
-    if (job.name.size() > 4 && job.name.ends_with(ext)) job.name.resize(job.name.size() - 4);
-  job.bounds = result.bounds;
-  job.layerCount = static_cast<uint32_t>(planes.size());
-  const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
-    std::string name = path.stem().string();
-    if (name.size() > 4 && name.ends_with(".stl")) name.resize(name.size() - 4);
-    return name;
+  const auto topology = [&] {
+    const auto begin = std::chrono::steady_clock::now();
+    adjacency = modelTopology(model, soup, templateTable, options, result, built);
+    // Features are separate meshes with their own tables; the template's table is never touched.
+    if (method == SliceMethod::SelfReuse)
+      for (std::size_t i = 0; i < features.size(); ++i) buildTable(features[i], featureTables[i]);
+    result.topologySeconds = secondsSince(begin);
   };
-  for (const auto& path : options.add) job.features.push_back({partName(path), PartRole::Add});
-  for (const auto& path : options.remove) job.features.push_back({partName(path), PartRole::Remove});
-  const bool uniform = options.planes.explicitZ.empty();
-  auto sinks = openContourSinks(options, job, &soup, features,
-                                uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
 
-  // Masks: grid, sink, and per-slot rasterizer state.
+  std::vector<double> planes;
+  ContourJob job;
+  std::vector<std::unique_ptr<ContourSink>> sinks;
   const bool masks = !options.masks.output.empty();
   MaskJob maskJob;
   std::unique_ptr<MaskSink> maskSink;
-  if (masks) {
-    BoundingBox extent = result.bounds;
-    for (std::size_t i = 0; i < options.add.size(); ++i) {
-      const BoundingBox b = boundsOf(features[i].corners);
-      extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
-      extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
+  MaskImage lightMap;  // light-uniformity map: a grayscale PNG of the display, the size of every mask
+  std::unique_ptr<LayerReport> report;
+  OutputTransaction* const outputs = OutputTransaction::current();
+  const auto setUpOutputs = [&] {
+    const OutputTransaction::Adopt use(outputs);  // this may run on another thread
+    std::string error;
+    planes = makePlanes(options.planes, result.bounds.min.z, result.bounds.max.z, error);
+    if (!error.empty()) throw InputError(model.string() + ": " + error);
+    checkPlanesCutModel(model, planes, result, features, options, result.warnings);
+
+    job.name = model.stem().string();
+    for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
+      if (job.name.size() > 4 && job.name.ends_with(ext)) job.name.resize(job.name.size() - 4);
+    job.bounds = result.bounds;
+    job.layerCount = static_cast<uint32_t>(planes.size());
+    const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
+      std::string name = path.stem().string();
+      if (name.size() > 4 && name.ends_with(".stl")) name.resize(name.size() - 4);
+      return name;
+    };
+    for (const auto& path : options.add) job.features.push_back({partName(path), PartRole::Add});
+    for (const auto& path : options.remove) job.features.push_back({partName(path), PartRole::Remove});
+    const bool uniform = options.planes.explicitZ.empty();
+    sinks = openContourSinks(options, job, &soup, features,
+                             uniform && planes.size() >= 2 ? planes[1] - planes[0] : 0.0);
+
+    // Masks: grid and sink (per-slot rasterizer state below).
+    if (masks) {
+      BoundingBox extent = result.bounds;
+      for (std::size_t i = 0; i < options.add.size(); ++i) {
+        const BoundingBox b = boundsOf(features[i].corners);
+        extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
+        extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
+      }
+      maskJob = makeMaskJob(options.masks, print, extent, job.name, planes);
+      maskJob.layerHeight = nominalLayerHeight(options.planes, planes);
+      // Archive timestamps come from the model file, so the same input gives the same bytes.
+      struct stat info {};
+      if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
+      maskJob.previewModel = soup.corners;  // rendered by the sink now, not kept
+      maskJob.previewRunner = parallelChunkRunner();
+      maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
+      maskJob.previewModel = {};
     }
-    maskJob = makeMaskJob(options.masks, print, extent, job.name, planes);
-    maskJob.layerHeight = nominalLayerHeight(options.planes, planes);
-    // Archive timestamps come from the model file, so the same input gives the same bytes.
-    struct stat info {};
-    if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
-    maskJob.previewModel = soup.corners;  // rendered by the sink now, not kept
-    maskJob.previewRunner = parallelChunkRunner();
-    maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
-    maskJob.previewModel = {};
-  }
-  // Light-uniformity map: a grayscale PNG of the display, the size of every mask.
-  MaskImage lightMap;
-  if (masks && !print.lightMap.empty()) lightMap = readLightMap(print.lightMap, maskJob);
+    if (masks && !print.lightMap.empty()) lightMap = readLightMap(print.lightMap, maskJob);
+    if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
+  };
+  parallelInvoke(topology, setUpOutputs);
   const bool gamma = masks && maskJob.antiAliased && print.gammaCorrection && *print.gammaCorrection != 1.0;
   const std::array<uint8_t, 256> gammaLut = gammaTable(gamma ? *print.gammaCorrection : 1.0);
-  std::unique_ptr<LayerReport> report;
-  if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
 
   std::vector<SliceMesh> meshes{{soup.corners, adjacency}};
   for (std::size_t i = 0; i < features.size(); ++i) meshes.push_back({features[i].corners, featureTables[i]});
