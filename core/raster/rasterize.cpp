@@ -632,7 +632,8 @@ void clearRowRuns(uint8_t* row, const std::vector<uint32_t>& runs, const std::ve
 
 // Turns a row lit on the runs `from` into one lit on the runs `to` (both increasing [begin, end) pairs,
 // none empty, none touching the next): only the pixels lit in one and not in the other are written,
-// so a row whose outline moved by a pixel costs a few bytes, not its runs twice.
+// so a row whose outline moved by a pixel costs a few bytes, not its runs twice, and an unchanged row
+// costs none. With no `from` (a dark row) it lights the runs of `to`.
 void changeRowRuns(uint8_t* row, std::span<const uint32_t> from, std::span<const uint32_t> to) {
   constexpr uint32_t kNone = std::numeric_limits<uint32_t>::max();
   std::size_t i = 0, j = 0;
@@ -707,10 +708,6 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
     prepareImage(grid, out);
   }
   if (width == 0 || height == 0 || !usableGrid(grid)) return;
-  const auto clearOldRuns = [&](uint32_t r, uint8_t* row) {
-    clearRowRuns(row, oldRuns, oldRowRuns, r);
-    oldRowRuns[2 * r + 1] = 0;  // done with
-  };
 
   out.rowRuns.assign(std::size_t{2} * height, 0);
   std::vector<uint32_t>& runs = out.runs;
@@ -750,26 +747,21 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
       }
     }
     runs.resize(kept + 2);
-    const auto count = static_cast<uint32_t>((runs.size() - first) / 2);
     out.rowRuns[2 * r] = static_cast<uint32_t>(first / 2);
-    out.rowRuns[2 * r + 1] = count;
+    out.rowRuns[2 * r + 1] = static_cast<uint32_t>((runs.size() - first) / 2);
     out.litBegin[r] = runs[first];
     out.litEnd[r] = runs.back();
+    std::span<const uint32_t> before;  // the row's lit runs before this call: none on a cleared image
     if (update) {
-      const uint32_t* old = oldRuns.data() + 2 * std::size_t{oldRowRuns[2 * r]};
-      const uint32_t oldCount = oldRowRuns[2 * r + 1];
+      before = {oldRuns.data() + 2 * std::size_t{oldRowRuns[2 * r]}, 2 * std::size_t{oldRowRuns[2 * r + 1]}};
       oldRowRuns[2 * r + 1] = 0;  // done with
-      if (oldCount != count || !std::equal(runs.begin() + first, runs.end(), old))
-        changeRowRuns(row, {old, 2 * std::size_t{oldCount}}, {runs.data() + first, 2 * std::size_t{count}});
-      continue;
     }
-    for (std::size_t p = first; p < runs.size(); p += 2)
-      std::memset(row + runs[p], 255, runs[p + 1] - runs[p]);
+    changeRowRuns(row, before, {runs.data() + first, runs.size() - first});
   }
   if (update) {  // rows lit before and dark now
     for (uint32_t r = 0; r < height; ++r)
       if (oldRowRuns[2 * r + 1] != 0)
-        clearOldRuns(r, out.pixels.data() + static_cast<std::size_t>(r) * width);
+        clearRowRuns(out.pixels.data() + static_cast<std::size_t>(r) * width, oldRuns, oldRowRuns, r);
   }
 }
 

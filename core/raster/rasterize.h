@@ -122,7 +122,7 @@ struct RasterScratch {
   std::vector<RasterEdge> bucketed;   // heads grouped by first sample line (count, prefix sum, fill)
   std::vector<uint32_t> bucketStart;  // sample lines + 1 offsets into bucketed
   std::vector<RasterEdge> active;     // edges crossing the current sample line, sorted by x
-  std::vector<RasterEdge> incoming;   // edges whose first sample line is the current one
+  std::vector<RasterEdge> incoming;   // chains whose first sample line is the current one (many)
   std::vector<uint32_t> previousRuns, previousRowRuns;  // the image's runs before this call (binary)
   std::vector<uint32_t> lineOfPoint;                    // first sample line at or above each point of a loop
   std::vector<uint8_t> linked;  // per edge: 1 where an edge before it in its chain hands on to it
