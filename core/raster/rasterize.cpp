@@ -70,16 +70,22 @@ Point2d gridPoint(Point2d p, bool transposed) {
   return transposed ? Point2d{p.y, p.x} : p;
 }
 
-// Groups `edges` by first(edge) < count, keeping their order inside a group (a counting sort):
-// bucketed[start[k], start[k + 1]) are the edges whose first is k.
-template <class Edge, class First>
-void bucketByFirst(const std::vector<Edge>& edges, uint32_t count, First first, std::vector<Edge>& bucketed,
-                   std::vector<uint32_t>& start) {
+// Groups the edges i of `edges` with keep(i) by first(edge) < count, keeping their order inside a group
+// (a counting sort): bucketed[start[k], start[k + 1]) are those whose first is k.
+template <class Edge, class First, class Keep>
+void bucketByFirst(const std::vector<Edge>& edges, uint32_t count, First first, Keep keep,
+                   std::vector<Edge>& bucketed, std::vector<uint32_t>& start) {
   start.assign(static_cast<std::size_t>(count) + 1, 0);
-  for (const Edge& e : edges) ++start[first(e) + 1];
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < edges.size(); ++i)
+    if (keep(i)) {
+      ++start[first(edges[i]) + 1];
+      ++kept;
+    }
   for (uint32_t k = 0; k < count; ++k) start[k + 1] += start[k];
-  bucketed.resize(edges.size());
-  for (const Edge& e : edges) bucketed[start[first(e)]++] = e;  // start[k] becomes start[k+1]
+  bucketed.resize(kept);
+  for (std::size_t i = 0; i < edges.size(); ++i)
+    if (keep(i)) bucketed[start[first(edges[i])]++] = edges[i];  // start[k] becomes start[k+1]
   for (uint32_t k = count; k > 0; --k) start[k] = start[k - 1];
   start[0] = 0;
 }
@@ -147,12 +153,9 @@ void buildEdgeTable(std::span<const ContourSet> sets, double origin, double pitc
     linkChains(edges, begin, edges.size(), sign, linked);
   });
 
-  std::vector<RasterEdge>& heads = scratch.heads;
-  heads.clear();
-  for (std::size_t m = 0; m < edges.size(); ++m)
-    if (linked[m] == 0) heads.push_back(edges[m]);
   bucketByFirst(
-      heads, count, [](const RasterEdge& e) { return e.first; }, scratch.bucketed, scratch.bucketStart);
+      edges, count, [](const RasterEdge& e) { return e.first; },
+      [&](std::size_t m) { return linked[m] == 0; }, scratch.bucketed, scratch.bucketStart);
 
   scratch.active.clear();
   scratch.active.reserve(edges.size());
@@ -312,8 +315,8 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
     }
   });
   bucketByFirst(
-      edges, height, [](const CoverageEdge& e) { return e.firstRow; }, scratch.coverageBucketed,
-      scratch.coverageRowStart);
+      edges, height, [](const CoverageEdge& e) { return e.firstRow; }, [](std::size_t) { return true; },
+      scratch.coverageBucketed, scratch.coverageRowStart);
   scratch.coverageActive.clear();
   scratch.pieceOfEdge.resize(edges.size());
 }

@@ -118,8 +118,7 @@ struct RasterEdge {
 // depends on the layer's edge count and the grid size, never on the number of layers.
 struct RasterScratch {
   std::vector<RasterEdge> edges;      // edges crossing the grid's sample lines, in input order
-  std::vector<RasterEdge> heads;      // the edges no other edge hands its place on to
-  std::vector<RasterEdge> bucketed;   // heads grouped by first sample line (count, prefix sum, fill)
+  std::vector<RasterEdge> bucketed;   // chain heads (not `linked`), grouped by first sample line
   std::vector<uint32_t> bucketStart;  // sample lines + 1 offsets into bucketed
   std::vector<RasterEdge> active;     // edges crossing the current sample line, sorted by x
   std::vector<RasterEdge> incoming;   // chains whose first sample line is the current one (many)
