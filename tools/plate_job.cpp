@@ -338,6 +338,14 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   return {static_cast<uint32_t>(planes.size()), volumeMm3 / 1000.0};
 }
 
+// One error for all of a plate job's problems: "JOB.json: <heading>:", then each problem on its own line.
+[[noreturn]] void throwProblems(const PlateJob& job, const std::string& heading,
+                                const std::vector<std::string>& problems) {
+  std::string text = job.sourceFile.string() + ": " + heading + ":";
+  for (const std::string& p : problems) text += "\n  " + p;
+  throw InputError(text);
+}
+
 // Given placements: overlaps (with the spacing), parts outside the printable area, parts taller than
 // the printer. Every problem is listed, each naming its part(s).
 void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
@@ -368,10 +376,7 @@ void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
       if (shapesOverlap(grown[a], grown[b]))
         problems.push_back("parts '" + results[fixed[a]].name + "' and '" + results[fixed[b]].name +
                            "' overlap or are closer than the spacing of " + mm(job.spacing));
-  if (problems.empty()) return;
-  std::string text = job.sourceFile.string() + ": the plate cannot be printed as given:";
-  for (const std::string& p : problems) text += "\n  " + p;
-  throw InputError(text);
+  if (!problems.empty()) throwProblems(job, "the plate cannot be printed as given", problems);
 }
 
 }  // namespace
@@ -459,12 +464,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   for (std::size_t p = 0; p < count; ++p)
     if (!errors[p].empty()) failed.push_back("part '" + job.parts[p].name + "': " + errors[p]);
   if (failed.size() == 1) throw InputError(failed[0]);
-  if (!failed.empty()) {
-    std::string text =
-        job.sourceFile.string() + ": " + std::to_string(failed.size()) + " parts cannot be used:";
-    for (const std::string& f : failed) text += "\n  " + f;
-    throw InputError(text);
-  }
+  if (!failed.empty()) throwProblems(job, std::to_string(failed.size()) + " parts cannot be used", failed);
   for (const PlatePartResult& r : result.parts) {
     const bool fromTable = r.topology.starts_with("loaded from template");
     result.templateChecked += fromTable ? 1 : 0;
