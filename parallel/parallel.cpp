@@ -33,18 +33,28 @@ unsigned ThreadLimit::available() {
 // see those happens-before edges. The release/acquire pairs below state the same edges in code TSan
 // sees (caller -> task start, task end -> caller, work(i) -> consume(i) -> the slot's next work); they
 // cost one atomic operation per chunk and change nothing else.
+class SchedulerEdges {
+ public:
+  SchedulerEdges() { count_.store(1, std::memory_order_release); }  // the caller's work so far -> tasks
+  void taskStarts() const { (void)count_.load(std::memory_order_acquire); }
+  void taskEnds() { count_.fetch_add(1, std::memory_order_release); }
+  void joined() const { (void)count_.load(std::memory_order_acquire); }  // every task -> the caller
+
+ private:
+  std::atomic<std::size_t> count_{0};
+};
+
 void parallelForChunks(std::size_t count, std::size_t grain,
                        const std::function<void(std::size_t, std::size_t)>& body) {
   if (count == 0) return;
-  std::atomic<std::size_t> handoff{0};
-  handoff.store(1, std::memory_order_release);
+  SchedulerEdges edges;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, grain > 0 ? grain : 1),
                     [&](const tbb::blocked_range<std::size_t>& r) {
-                      (void)handoff.load(std::memory_order_acquire);
+                      edges.taskStarts();
                       body(r.begin(), r.end());
-                      handoff.fetch_add(1, std::memory_order_release);
+                      edges.taskEnds();
                     });
-  (void)handoff.load(std::memory_order_acquire);
+  edges.joined();
 }
 
 ChunkRunner parallelChunkRunner() {
@@ -56,29 +66,18 @@ ChunkRunner parallelChunkRunner() {
 
 void parallelInvoke(const std::function<void()>& a, const std::function<void()>& b) {
   std::exception_ptr errorA, errorB;
-  // The happens-before edges TSan cannot see inside libtbb, as in parallelForChunks.
-  std::atomic<int> handoff{0};
-  handoff.store(1, std::memory_order_release);
-  tbb::parallel_invoke(
-      [&] {
-        (void)handoff.load(std::memory_order_acquire);
-        try {
-          a();
-        } catch (...) {
-          errorA = std::current_exception();
-        }
-        handoff.fetch_add(1, std::memory_order_release);
-      },
-      [&] {
-        (void)handoff.load(std::memory_order_acquire);
-        try {
-          b();
-        } catch (...) {
-          errorB = std::current_exception();
-        }
-        handoff.fetch_add(1, std::memory_order_release);
-      });
-  (void)handoff.load(std::memory_order_acquire);
+  SchedulerEdges edges;
+  const auto task = [&edges](const std::function<void()>& f, std::exception_ptr& error) {
+    edges.taskStarts();
+    try {
+      f();
+    } catch (...) {
+      error = std::current_exception();
+    }
+    edges.taskEnds();
+  };
+  tbb::parallel_invoke([&] { task(a, errorA); }, [&] { task(b, errorB); });
+  edges.joined();
   if (errorA) std::rethrow_exception(errorA);
   if (errorB) std::rethrow_exception(errorB);
 }
