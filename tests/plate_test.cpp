@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <sstream>
 
 #include "core/mesh/mesh_info.h"
 #include "core/mesh/weld.h"
@@ -59,9 +60,34 @@ MaskImage readPng(const fs::path& path) {
   return mask;
 }
 
+// The polylines of an ASCII CLI file: per layer, per polyline its id, dir and coordinates.
+struct CliPolyline {
+  int id = 0, dir = 0;
+  std::vector<double> xy;
+};
+std::vector<std::vector<CliPolyline>> readAsciiCliLayers(const fs::path& path) {
+  std::vector<std::vector<CliPolyline>> layers;
+  std::istringstream in(readBytes(path));
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("$$LAYER/", 0) == 0) layers.emplace_back();
+    if (line.rfind("$$POLYLINE/", 0) != 0) continue;
+    std::istringstream fields(line.substr(11));
+    std::string field;
+    std::vector<double> numbers;
+    while (std::getline(fields, field, ',')) numbers.push_back(std::stod(field));
+    CliPolyline polyline{static_cast<int>(numbers.at(0)), static_cast<int>(numbers.at(1)), {}};
+    polyline.xy.assign(numbers.begin() + 3, numbers.end());
+    EXPECT_EQ(polyline.xy.size(), 2 * static_cast<std::size_t>(numbers.at(2))) << line;
+    layers.back().push_back(std::move(polyline));
+  }
+  return layers;
+}
+
 // Every layer of the plate is the union of the parts sliced alone, pixel for pixel, and no pixel is lit
-// by two parts. Part b is turned by 90 degrees on the plate and compared with its mesh turned the same
-// way and sliced alone; placements are whole pixels apart.
+// by two parts; its contours are the parts' contours sliced alone, moved by the parts' translations, part
+// after part. Part b is turned by 90 degrees on the plate and compared with its mesh turned the same way
+// and sliced alone; placements are whole pixels apart.
 TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
   const double pixel = 0.05;
   FacetSoup turned = aligner(1);
@@ -79,7 +105,7 @@ TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
       "resolution": [2600, 1600]},
     "parts": [{"name": "a", "model": %s, "template": %s, "placement": {"x": %.17g, "y": %.17g}},
               {"name": "b", "model": %s, "template": %s, "placement": {"x": %.17g, "y": %.17g, "rotation": 90}}],
-    "outputs": {"masks": "plate", "report": "report.json"}})",
+    "outputs": {"masks": "plate", "contours": ["plate.cli"], "report": "report.json"}})",
                 q(kCase0).c_str(), q(alignerTable()).c_str(), ax, ay, q(kStage2).c_str(),
                 q(alignerTable()).c_str(), bx, by);
   const PlateResult plate = runPlateJob(job(text), nullptr);
@@ -98,8 +124,32 @@ TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
     o.masks.pixel = pixel;
     o.masks.resolution = std::pair<uint32_t, uint32_t>{2600, 1600};
     o.masks.origin = std::pair<double, double>{-plate.parts[p].tx, -plate.parts[p].ty};
+    o.outputs = {dir_ / ("alone" + std::to_string(p) + ".cli")};
     runSliceJob(models[p], o, nullptr);
   }
+  // Contours: part p + 1 of each plate layer is part p's layer alone, translated (6 decimals each way).
+  const auto plateCli = readAsciiCliLayers(dir_ / "plate.cli");
+  ASSERT_EQ(plateCli.size(), plate.layers[0]);
+  std::size_t points = 0;
+  for (int p = 0; p < 2; ++p) {
+    const auto alone = readAsciiCliLayers(dir_ / ("alone" + std::to_string(p) + ".cli"));
+    ASSERT_EQ(alone.size(), plateCli.size());
+    const double t[2] = {plate.parts[p].tx, plate.parts[p].ty};
+    for (std::size_t k = 0; k < alone.size(); ++k) {
+      std::vector<CliPolyline> part;
+      for (const CliPolyline& l : plateCli[k])
+        if (l.id == p + 1) part.push_back(l);
+      ASSERT_EQ(part.size(), alone[k].size()) << "part " << p << " layer " << k;
+      for (std::size_t l = 0; l < part.size(); ++l) {
+        ASSERT_EQ(part[l].dir, alone[k][l].dir);
+        ASSERT_EQ(part[l].xy.size(), alone[k][l].xy.size());
+        for (std::size_t i = 0; i < part[l].xy.size(); ++i)
+          ASSERT_NEAR(part[l].xy[i], alone[k][l].xy[i] + t[i % 2], 1.5e-6) << "part " << p << " layer " << k;
+        points += part[l].xy.size() / 2;
+      }
+    }
+  }
+  EXPECT_GT(points, 10000u);
   uint64_t lit = 0;
   const auto layerFiles = [](const fs::path& folder) {
     std::vector<fs::path> files;
