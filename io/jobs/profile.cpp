@@ -196,8 +196,8 @@ std::vector<std::pair<std::string, std::string>> printerPreset(const PrinterPres
     // 0.04725 exactly again, so the grid is the preset's.
     a.emplace_back("display_width", formatNumber(std::round(p.width * p.pixel * 1e6) / 1e6));
     a.emplace_back("display_height", formatNumber(std::round(p.height * p.pixel * 1e6) / 1e6));
-    a.emplace_back("max_print_height", "150");
   }
+  if (p.buildHeight > 0) a.emplace_back("max_print_height", formatNumber(p.buildHeight));
   if (p.portrait) {
     a.emplace_back("display_orientation", "portrait");
     a.emplace_back("display_mirror_x", "1");
