@@ -13,10 +13,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "core/number_text.h"
 #include "io/errors.h"
 #include "io/jobs/json_reader.h"
-#include "io/jobs/profile.h"
 
 namespace toposlice {
 namespace {
@@ -127,33 +125,8 @@ class JobParser : public JsonReader {
     if (const Json* x = find(*v, "scale")) job_.scale = positive(*x, key("scale"));
     if (const Json* x = find(*v, "profile")) job_.profile = input(*x, key("profile"));
     if (const Json* x = find(*v, "material")) job_.material = string(*x, key("material"));
-    if (const Json* x = find(*v, "print_settings")) {
-      object(*x, key("print_settings"));
-      PrintSettings check;  // every key and value checked now, not after hours of slicing
-      for (const auto& [k, value] : x->items()) {
-        const std::string where = childPath(key("print_settings"), k);
-        std::string text;
-        if (value.is_string())
-          text = value.get<std::string>();
-        else if (value.is_boolean())
-          text = value.get<bool>() ? "1" : "0";
-        else if (value.is_number_float())
-          text = formatNumber(value.get<double>());
-        else if (value.is_number())
-          text = value.dump();
-        else
-          wrongType(value, where, "a number, a string or true/false");
-        if (k == "light_map" && !text.empty()) text = input(value, where).string();
-        try {
-          assignSetting(check, k, text, "print_settings");
-        } catch (const InputError& e) {
-          std::string what = e.what();
-          if (what.starts_with("print_settings: ")) what = what.substr(16);
-          fail(where, what);
-        }
-        job_.printSettings.emplace_back(k, text);
-      }
-    }
+    if (const Json* x = find(*v, "print_settings"))
+      job_.printSettings = printSettings(*x, key("print_settings"));
   }
 
   void parseVariants(const Json& v) {

@@ -5,6 +5,9 @@
 #include <iterator>
 #include <system_error>
 
+#include "core/number_text.h"
+#include "io/jobs/profile.h"
+
 namespace toposlice::jobjson {
 
 std::string readJobText(const fs::path& path, const char* kind) {
@@ -20,6 +23,37 @@ std::string readJobText(const fs::path& path, const char* kind) {
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) throw InputError(name + ": read error");
   return text;
+}
+
+std::vector<std::pair<std::string, std::string>> JsonReader::printSettings(const Json& v,
+                                                                           const std::string& at) {
+  object(v, at);
+  std::vector<std::pair<std::string, std::string>> settings;
+  PrintSettings check;
+  for (const auto& [k, value] : v.items()) {
+    const std::string where = childPath(at, k);
+    std::string text;
+    if (value.is_string())
+      text = value.get<std::string>();
+    else if (value.is_boolean())
+      text = value.get<bool>() ? "1" : "0";
+    else if (value.is_number_float())
+      text = formatNumber(value.get<double>());
+    else if (value.is_number())
+      text = value.dump();
+    else
+      wrongType(value, where, "a number, a string or true/false");
+    if (k == "light_map" && !text.empty()) text = input(value, where).string();
+    try {
+      assignSetting(check, k, text, "print_settings");
+    } catch (const InputError& e) {
+      std::string what = e.what();
+      if (what.starts_with("print_settings: ")) what = what.substr(16);
+      fail(where, what);
+    }
+    settings.emplace_back(k, text);
+  }
+  return settings;
 }
 
 }  // namespace toposlice::jobjson

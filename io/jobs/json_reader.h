@@ -280,6 +280,11 @@ class JsonReader {
     return paths;
   }
 
+  // "print_settings": an object of printer and material keys (io/jobs/profile.h) over the chosen
+  // profiles, each value checked now (not after hours of slicing) and returned as text in order; a
+  // light_map path is a job input, resolved against the job's folder.
+  std::vector<std::pair<std::string, std::string>> printSettings(const Json& v, const std::string& at);
+
   // No file is both read and written by the job (the table counts as written: it may be created).
   void checkOutputs() const {
     for (const auto& [file, jsonPath] : outputs_) {
