@@ -6,11 +6,15 @@
 #include <cmath>
 #include <sstream>
 
+#include <zip.h>  // libzip: reads the SL1 back
+#include <nlohmann/json.hpp>
+
 #include "core/mesh/mesh_info.h"
 #include "core/mesh/weld.h"
 #include "core/print/arrange.h"
 #include "io/errors.h"
 #include "io/jobs/plate_job_file.h"
+#include "io/jobs/profile.h"
 #include "io/jobs/template_file.h"
 #include "io/masks/mask_png.h"
 #include "io/masks/mask_sink.h"
@@ -51,6 +55,7 @@ class PlateTest : public CliToolBase {
     return path;
   }
   PlateJob job(const std::string& text) { return parsePlateJob(text, dir_, "job.json"); }
+  void expectPartsAsSlicedAlone(const std::string& print, const ProfileChoice& choice);
 };
 
 MaskImage readPng(const fs::path& path) {
@@ -87,8 +92,9 @@ std::vector<std::vector<CliPolyline>> readAsciiCliLayers(const fs::path& path) {
 // Every layer of the plate is the union of the parts sliced alone, pixel for pixel, and no pixel is lit
 // by two parts; its contours are the parts' contours sliced alone, moved by the parts' translations, part
 // after part. Part b is turned by 90 degrees on the plate and compared with its mesh turned the same way
-// and sliced alone; placements are whole pixels apart.
-TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
+// and sliced alone; placements are whole pixels apart. `print` adds members to the job's top level (a
+// profile, print_settings); the parts alone are sliced with `choice`, the same settings.
+void PlateTest::expectPartsAsSlicedAlone(const std::string& print, const ProfileChoice& choice) {
   const double pixel = 0.05;
   FacetSoup turned = aligner(1);
   for (Point3f& p : turned.corners) p = {-p.y, p.x, p.z};  // 90 degrees, exact
@@ -101,12 +107,12 @@ TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
   const double ax = snap(0.5 * (ba.min.x + ba.max.x), 36), ay = snap(0.5 * (ba.min.y + ba.max.y), 38);
   const double bx = snap(0.5 * (bb.min.x + bb.max.x), 100), by = snap(0.5 * (bb.min.y + bb.max.y), 40);
   char text[2048];
-  std::snprintf(text, sizeof text, R"({"settings": {"layer_height": 0.25, "z0": -3.6, "pixel": 0.05,
+  std::snprintf(text, sizeof text, R"({%s "settings": {"layer_height": 0.25, "z0": -3.6, "pixel": 0.05,
       "resolution": [2600, 1600]},
     "parts": [{"name": "a", "model": %s, "template": %s, "placement": {"x": %.17g, "y": %.17g}},
               {"name": "b", "model": %s, "template": %s, "placement": {"x": %.17g, "y": %.17g, "rotation": 90}}],
     "outputs": {"masks": "plate", "contours": ["plate.cli"], "report": "report.json"}})",
-                q(kCase0).c_str(), q(alignerTable()).c_str(), ax, ay, q(kStage2).c_str(),
+                print.c_str(), q(kCase0).c_str(), q(alignerTable()).c_str(), ax, ay, q(kStage2).c_str(),
                 q(alignerTable()).c_str(), bx, by);
   const PlateResult plate = runPlateJob(job(text), nullptr);
   ASSERT_EQ(plate.plates, 1u);
@@ -125,6 +131,7 @@ TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
     o.masks.resolution = std::pair<uint32_t, uint32_t>{2600, 1600};
     o.masks.origin = std::pair<double, double>{-plate.parts[p].tx, -plate.parts[p].ty};
     o.outputs = {dir_ / ("alone" + std::to_string(p) + ".cli")};
+    o.print = resolvePrintSettings(choice);
     runSliceJob(models[p], o, nullptr);
   }
   // Contours: part p + 1 of each plate layer is part p's layer alone, translated (6 decimals each way).
@@ -150,7 +157,7 @@ TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
     }
   }
   EXPECT_GT(points, 10000u);
-  uint64_t lit = 0;
+  uint64_t lit = 0, grey = 0;
   const auto layerFiles = [](const fs::path& folder) {
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(folder))
@@ -173,9 +180,45 @@ TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
       lit += whole.pixels[i] ? 1 : 0;
     }
     EXPECT_EQ(differ, 0u) << "layer " << k;
+    for (const uint8_t v : whole.pixels) grey += v != 0 && v != 255 ? 1 : 0;
     EXPECT_EQ(shared, 0u) << "layer " << k;
   }
   EXPECT_GT(lit, 100000u);
+  const PrintSettings settings = resolvePrintSettings(choice);
+  EXPECT_EQ(grey > 0, settings.gammaCorrection.value_or(0) > 0) << "anti-aliased masks have grey edges";
+}
+
+TEST_F(PlateTest, PartMasksEqualThePartsSlicedAlone) {
+  expectPartsAsSlicedAlone("", {});
+}
+
+// With a profile file, a material and overrides (scaling, z scaling, absolute correction, elephant foot,
+// gamma, a light map), every part on the plate is what it is when sliced alone with the same settings:
+// scaled about its own centre, corrected, then moved.
+TEST_F(PlateTest, CorrectionsApplyToEachPartAsWhenSlicedAlone) {
+  MaskImage light;
+  light.width = 2600;
+  light.height = 1600;
+  light.pixels.resize(std::size_t{2600} * 1600);
+  for (std::size_t i = 0; i < light.pixels.size(); ++i)
+    light.pixels[i] = static_cast<uint8_t>(200 + (i % 2600) * 55 / 2599);  // brighter to the right
+  std::vector<uint8_t> png;
+  encodeMaskPng(light, png);
+  tool_test::writeBytes(dir_ / "light.png", std::string(png.begin(), png.end()));
+  tool_test::writeBytes(dir_ / "lab.json", R"({"printers": {"lab": {"relative_correction_x": 1.02,
+      "relative_correction_y": 1.02, "gamma_correction": 0.8}},
+    "materials": {"resin": {"exposure_time": 3.5, "material_correction_z": 1.01}}})");
+  ProfileChoice choice;
+  choice.file = dir_ / "lab.json";
+  choice.printer = "lab";
+  choice.material = "resin";
+  choice.overrides = {{"absolute_correction", "0.05"},
+                      {"elefant_foot_compensation", "0.2"},
+                      {"light_map", (dir_ / "light.png").string()}};
+  expectPartsAsSlicedAlone(R"("profile": "lab.json", "printer": "lab", "material": "resin",
+      "print_settings": {"absolute_correction": 0.05, "elefant_foot_compensation": 0.2,
+      "light_map": "light.png"},)",
+                           choice);
 }
 
 ArrangeSettings plate8k() {
@@ -233,6 +276,81 @@ TEST(ArrangeTest, AlignersNestBetterThanShelves) {
     std::printf("%zu parts: %u plates (shelf %u), first plate density %.3f (shelf %.3f), %.3f s\n", n,
                 a.plates, shelf.plates, a.density(0), shelf.density(0), seconds);
   }
+}
+
+// An entry of a zip archive, read with libzip (not the writer's minizip); empty when missing.
+std::string zipEntry(const fs::path& archive, const char* name) {
+  int err = 0;
+  zip_t* zip = zip_open(archive.c_str(), ZIP_RDONLY, &err);
+  if (zip == nullptr) return {};
+  std::string text;
+  if (zip_file_t* f = zip_fopen(zip, name, 0)) {
+    char buffer[4096];
+    for (zip_int64_t n; (n = zip_fread(f, buffer, sizeof buffer)) > 0;)
+      text.append(buffer, static_cast<std::size_t>(n));
+    zip_fclose(f);
+  }
+  zip_close(zip);
+  return text;
+}
+
+// Through the program: the display comes from the profile file's only printer, the exposure from its
+// only material, print_settings override both; the SL1 and the report carry what was chosen.
+TEST_F(PlateTest, ProfileSettingsReachThePrinterFileAndTheReport) {
+  tool_test::writeBytes(dir_ / "lab.json", R"({"printers": {"lab": {"display_pixels_x": 3000,
+      "display_pixels_y": 2000, "display_width": 150, "display_height": 100, "max_print_height": 40}},
+    "materials": {"resin": {"exposure_time": 2.5, "initial_exposure_time": 25, "faded_layers": 3}}})");
+  tool_test::writeBytes(dir_ / "job.json",
+                        "{\"profile\": \"lab.json\", \"print_settings\": "
+                        "{\"faded_layers\": 4, \"absolute_correction\": -0.02},"
+                        "\"settings\": {\"layer_height\": 0.5},"
+                        "\"parts\": [{\"name\": \"a\", \"model\": " +
+                            q(kCase0) +
+                            ", \"placement\": \"auto\"}],"
+                            "\"outputs\": {\"masks\": \"p.sl1\", \"report\": \"r.json\"}}");
+  const tool_test::RunResult r = run({"plate", (dir_ / "job.json").string(), "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  const std::string config = zipEntry(dir_ / "p.sl1", "config.ini");
+  for (const char* line : {"expTime = 2.5\n", "expTimeFirst = 25\n", "numFade = 4\n"})
+    EXPECT_NE(config.find(line), std::string::npos) << line << config;
+  const std::string prusa = zipEntry(dir_ / "p.sl1", "prusaslicer.ini");
+  for (const char* line : {"display_pixels_x = 3000\n", "absolute_correction = -0.02\n"})
+    EXPECT_NE(prusa.find(line), std::string::npos) << line << prusa;
+  const auto report = nlohmann::json::parse(readBytes(dir_ / "r.json"));
+  EXPECT_EQ(report["printer"], "lab");
+  EXPECT_EQ(report["material"], "resin");
+  EXPECT_EQ(report["image"]["width"], 3000);
+  EXPECT_EQ(report["image"]["pixel_mm"], 0.05);
+  EXPECT_EQ(report["print_settings"]["values"]["exposure_time"], "2.5");
+  EXPECT_EQ(report["print_settings"]["set_by"]["faded_layers"], "plate job print_settings");
+
+  // The profile's max_print_height is the plate's build height; a key print_settings does not know, a light
+  // map on binary masks and one of the wrong size are refused, named, before anything is written.
+  const auto refused = [&](const std::string& print, const std::string& expected, bool oneLine = true) {
+    tool_test::writeBytes(dir_ / "bad.json", "{\"profile\": \"lab.json\", " + print +
+                                                 "\"settings\": {\"layer_height\": 0.5},"
+                                                 "\"parts\": [{\"name\": \"a\", \"model\": " +
+                                                 q(kCase0) +
+                                                 ", \"placement\": \"auto\"}],"
+                                                 "\"outputs\": {\"masks\": \"q.sl1\"}}");
+    const tool_test::RunResult bad = run({"plate", (dir_ / "bad.json").string()});
+    EXPECT_EQ(bad.code(), 1) << bad.describe();
+    if (oneLine) expectOneErrorLine(bad);
+    EXPECT_NE(bad.err.find(expected), std::string::npos) << bad.err;
+    EXPECT_FALSE(fs::exists(dir_ / "q.sl1"));
+  };
+  refused("\"print_settings\": {\"max_print_height\": 8},", "taller than the printer's build height of 8.000",
+          false);  // the placement problems are listed, one per line
+  refused("\"print_settings\": {\"exposure\": 8},", "bad.json: print_settings.exposure: unknown");
+  MaskImage small;
+  small.width = small.height = 10;
+  small.pixels.assign(100, 255);
+  std::vector<uint8_t> png;
+  encodeMaskPng(small, png);
+  tool_test::writeBytes(dir_ / "light.png", std::string(png.begin(), png.end()));
+  refused("\"print_settings\": {\"light_map\": \"light.png\"},", "light_map");
+  refused("\"print_settings\": {\"light_map\": \"light.png\", \"gamma_correction\": 1},",
+          "light.png: the light map is 10x10 pixels, the masks 3000x2000");
 }
 
 TEST_F(PlateTest, ProblemsWithGivenPlacementsNameTheParts) {

@@ -14,11 +14,12 @@
 #include "core/mesh/mesh_info.h"
 #include "core/number_text.h"
 #include "core/print/arrange.h"
-#include "core/print/printer.h"
+#include "core/print/corrections.h"
 #include "core/slicing/contours.h"
 #include "io/errors.h"
 #include "io/masks/mask_png.h"
 #include "io/output_file.h"
+#include "offset/polygon_offset.h"
 #include "parallel/parallel.h"
 #include "tools/slice_stages.h"
 
@@ -75,22 +76,36 @@ struct PlateGeometry {
   double heightMm() const { return height * pixel; }
 };
 
-PlateGeometry plateGeometry(const PlateJob& job) {
+// The plate's display: the resolved printer's (preset or profile, with print_settings), then settings.
+PlateGeometry plateGeometry(const PlateJob& job, const PrintSettings& print) {
   PlateGeometry g;
-  if (!job.printer.empty()) {
-    const auto preset = findPrinter(job.printer);
-    if (!preset) throw InputError("unknown printer '" + job.printer + "' (known: " + printerNames() + ")");
-    g.width = preset->width;
-    g.height = preset->height;
-    g.pixel = preset->pixel;
-    g.buildHeight = preset->buildHeight;
-  }
+  g.width = print.pixelsX;
+  g.height = print.pixelsY;
+  g.pixel = print.pixelsX > 0 && print.displayWidth > 0 ? print.displayWidth / print.pixelsX : 0.0;
+  g.buildHeight = print.maxPrintHeight;
   if (job.resolution) g.width = (*job.resolution)[0], g.height = (*job.resolution)[1];
   if (job.pixel) g.pixel = *job.pixel;
   if (job.buildHeight) g.buildHeight = *job.buildHeight;
+  const std::string printer = print.printerName.empty() ? "" : "printer '" + print.printerName + "' ";
+  if (g.width == 0 || g.height == 0)
+    throw InputError(job.sourceFile.string() + ": " + printer +
+                     "has no display size: give settings.resolution, or display_pixels_x and _y");
   if (!(g.pixel > 0))
-    throw InputError("printer '" + job.printer + "' has no fixed pixel size: give settings.pixel (mm)");
+    throw InputError(job.sourceFile.string() + ": " + printer +
+                     "has no fixed pixel size: give settings.pixel (mm), or display_width");
   return g;
+}
+
+// The scaling correction's part that turns with a part (the same factor in x and y, and z), and the rest,
+// applied in the plate's axes once the part is turned: their product is the correction in the printer's
+// axes, whatever the part's rotation.
+std::array<double, 3> turningScale(const PrintSettings& print) {
+  const auto s = print.scale();
+  return {std::min(s[0], s[1]), std::min(s[0], s[1]), s[2]};
+}
+std::array<double, 3> plateAxesScale(const PrintSettings& print) {
+  const auto s = print.scale(), t = turningScale(print);
+  return {s[0] / t[0], s[1] / t[1], 1.0};
 }
 
 // The contours of a layer moved by (tx, ty), into `out` (its capacity reused).
@@ -146,7 +161,8 @@ struct PlateSlice {
 // Slices the parts `members` of one plate together and writes its outputs into the transaction.
 PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std::size_t>& members,
                       std::vector<LoadedPart>& loaded, std::vector<PlatePartResult>& results,
-                      const PlateGeometry& geometry, const ProgressContext* progress) {
+                      const PrintSettings& print, const PlateGeometry& geometry,
+                      const ProgressContext* progress) {
   // Planes: z0 from the job, else the lowest part bottom of this plate.
   double zmin = INFINITY, zmax = -INFINITY;
   BoundingBox extent{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
@@ -166,7 +182,8 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   // Meshes in plate order: each part's model, add-ons, removals; their sign and owning part.
   std::vector<SliceMesh> meshes;
   std::vector<int> signs;
-  std::vector<std::size_t> owner;  // index into members
+  std::vector<std::size_t> owner;      // index into members
+  std::vector<std::size_t> partStart;  // per member: index of its model in meshes (its features follow)
   ContourJob contourJob;
   contourJob.name = job.parts[members[0]].name;
   contourJob.bounds = extent;
@@ -176,6 +193,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     LoadedPart& part = loaded[p];
     const PlatePart& given = job.parts[p];
     if (m > 0) contourJob.features.push_back({given.name, PartRole::Model});
+    partStart.push_back(meshes.size());
     meshes.push_back({part.model.corners, part.adjacency});
     signs.push_back(1);
     owner.push_back(m);
@@ -200,9 +218,10 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   const bool masks = !job.masks.empty();
   MaskJob maskJob;
   std::unique_ptr<MaskSink> maskSink;
+  MaskImage lightMap;
   if (masks) {
     MaskOptions o;
-    o.printer = job.printer;
+    o.printer = print.printerName;
     o.pixel = geometry.pixel;
     o.resolution = std::pair<uint32_t, uint32_t>{geometry.width, geometry.height};
     o.origin = std::pair<double, double>{0.0, 0.0};
@@ -212,10 +231,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     const std::filesystem::path out = plateOutputPath(job.masks, plate);
     o.output = out;  // the format decides whether a portrait printer's orientation applies
     std::string name = out.stem().string();
-    ProfileChoice choice;  // the printer preset and material: exposure settings for the printer files
-    choice.printer = job.printer;
-    choice.material = job.material;
-    maskJob = makeMaskJob(o, resolvePrintSettings(choice), extent, name, planes);
+    maskJob = makeMaskJob(o, print, extent, name, planes);
     maskJob.layerHeight = job.layerHeight;
     struct stat info {};
     if (::stat(job.sourceFile.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
@@ -237,7 +253,15 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     maskJob.previewRunner = parallelChunkRunner();
     maskSink = makeMaskSink(out, maskJob, job.overwrite);
     maskJob.previewModel = {};
+    if (!print.lightMap.empty()) lightMap = readLightMap(print.lightMap, maskJob);
   }
+  const bool gamma = masks && maskJob.antiAliased && print.gammaCorrection && *print.gammaCorrection != 1.0;
+  const std::array<uint8_t, 256> gammaLut = gammaTable(gamma ? *print.gammaCorrection : 1.0);
+  // Absolute correction and elephant foot, part by part on its solid region (model, add-ons, removals):
+  // every output sees the corrected parts, as a part sliced alone would be corrected.
+  const bool correcting = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+  const auto elephantFootLayers =
+      static_cast<uint32_t>(std::clamp<std::size_t>(planes.size(), 1, print.elephantFootFadeLayers()));
 
   SliceSettings settings;
   if (!job.method.empty()) parseSliceMethod(job.method, settings.method);
@@ -246,14 +270,17 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   const uint32_t pictureEvery =
       std::max<uint32_t>(1, static_cast<uint32_t>((planes.size() + kPictureLayers - 1) / kPictureLayers));
   struct LayerResult {
-    std::vector<LayerContours> moved;  // every mesh's contours on the plate
-    std::vector<double> partArea;      // per part: signed contour area
+    // Every mesh's contours on the plate; with corrections each part's model holds its corrected region
+    // and its features are empty.
+    std::vector<LayerContours> moved;
+    std::vector<double> partArea;  // per part: signed contour area
     EncodedMaskLayer encoded;
     double area = 0;
   };
   struct SlotState : MaskSlotScratch {
     std::vector<LayerResult> layers;
     Picture picture;
+    LayerContours corrected;  // a part's corrected region where the part was sliced, before it is moved
   };
   std::vector<SlotState> slots(plan.slots);
   for (SlotState& s : slots) {
@@ -271,10 +298,28 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
     std::fill(r.partArea.begin(), r.partArea.end(), 0.0);
+    if (correcting) {
+      // Each part corrected where it was sliced, then moved: the same loops as the part corrected alone.
+      const LayerCorrection correction{print.absoluteCorrection,
+                                       elephantFootAt(k, print.elefantFootCompensation, elephantFootLayers),
+                                       print.elefantFootMinWidth};
+      for (std::size_t m = 0; m < partCount; ++m) {
+        const std::size_t first = partStart[m], end = m + 1 < partCount ? partStart[m + 1] : layer.size();
+        s.sets.clear();
+        for (std::size_t i = first; i < end; ++i) s.sets.push_back({&layer[i], signs[i]});
+        correctLayer(s.sets, correction, layer[first].z, s.corrected);
+        const PlatePartResult& part = results[members[m]];
+        translateLayer(s.corrected, part.tx, part.ty, r.moved[first]);
+        for (std::size_t i = first + 1; i < end; ++i) r.moved[i].clear(layer[i].z);
+      }
+    } else {
+      for (std::size_t i = 0; i < layer.size(); ++i) {
+        const PlatePartResult& part = results[members[owner[i]]];
+        translateLayer(layer[i], part.tx, part.ty, r.moved[i]);
+      }
+    }
     s.sets.clear();
     for (std::size_t i = 0; i < layer.size(); ++i) {
-      const PlatePartResult& part = results[members[owner[i]]];
-      translateLayer(layer[i], part.tx, part.ty, r.moved[i]);
       r.partArea[owner[i]] += signs[i] * layerSignedArea(r.moved[i]);
       s.sets.push_back({&r.moved[i], signs[i]});
     }
@@ -283,27 +328,29 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
       for (const double a : r.partArea) r.area += a;
       return;
     }
-    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster);
+    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, gamma ? gammaLut.data() : nullptr,
+                                lightMap.pixels.empty() ? nullptr : &lightMap);
     if (!job.picture.empty() && (k % pictureEvery == 0 || k + 1 == planes.size()))
       s.picture.add(s.mask, maskJob.grid);
     maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours>, std::size_t slot, uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
-    for (auto& sink : sinks) sink->writeLayer(k, r.moved);
+    const std::vector<LayerContours>& placed = r.moved;
+    for (auto& sink : sinks) sink->writeLayer(k, placed);
     if (maskSink) maskSink->writeEncodedLayer(k, planes[k], r.encoded);
     for (std::size_t m = 0; m < partCount; ++m) {
       PlatePartResult& part = results[members[m]];
       partVolume[m] += r.partArea[m] * job.layerHeight;
       bool any = false;
-      for (std::size_t i = 0; i < r.moved.size(); ++i)
-        any = any || (owner[i] == m && r.moved[i].loopCount() > 0);
+      for (std::size_t i = 0; i < placed.size(); ++i)
+        any = any || (owner[i] == m && placed[i].loopCount() > 0);
       if (any) {
         if (part.firstLayer < 0) part.firstLayer = k;
         part.lastLayer = k;
       }
     }
-    for (const LayerContours& c : r.moved) loops += c.loopCount();
+    for (const LayerContours& c : placed) loops += c.loopCount();
     volumeMm3 += r.area * job.layerHeight;
     plateArea = std::max(plateArea, r.area);
   };
@@ -349,7 +396,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
 // Given placements: overlaps (with the spacing), parts outside the printable area, parts taller than
 // the printer. Every problem is listed, each naming its part(s).
 void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
-                     const std::vector<PlatePartResult>& results, const PlateGeometry& g) {
+                     const std::vector<PlatePartResult>& results, const PlateGeometry& g, double spacing) {
   std::vector<std::string> problems;
   std::vector<std::size_t> fixed;
   std::vector<CellShape> grown;  // each grown by half the spacing
@@ -369,20 +416,39 @@ void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
                          ") sticks out of the printable area (" + mm(g.widthMm()) + " x " + mm(g.heightMm()) +
                          ") by " + mm(out));
     fixed.push_back(p);
-    grown.push_back(placeFootprint(loaded[p].footprint, r.placement.rotation, r.tx, r.ty, 0.5 * job.spacing));
+    grown.push_back(placeFootprint(loaded[p].footprint, r.placement.rotation, r.tx, r.ty, 0.5 * spacing));
   }
   for (std::size_t a = 0; a < fixed.size(); ++a)
     for (std::size_t b = a + 1; b < fixed.size(); ++b)
       if (shapesOverlap(grown[a], grown[b]))
-        problems.push_back("parts '" + results[fixed[a]].name + "' and '" + results[fixed[b]].name +
-                           "' overlap or are closer than the spacing of " + mm(job.spacing));
+        problems.push_back(
+            "parts '" + results[fixed[a]].name + "' and '" + results[fixed[b]].name +
+            "' overlap or are closer than the spacing of " + mm(spacing) +
+            (spacing > job.spacing ? " (the job's, and room for the scaling correction)" : ""));
   if (!problems.empty()) throwProblems(job, "the plate cannot be printed as given", problems);
+}
+
+// Room the footprints leave for the scaling correction applied after turning (plateAxesScale): its
+// largest factor minus 1 times the farthest any vertex can be from the centre of a turned part's
+// bounding box (half the diagonal of the box of a disc of the part's diameter), for two neighbours.
+double residualSpacing(const PlateJob& job, const std::vector<LoadedPart>& loaded,
+                       const PrintSettings& print) {
+  const std::array<double, 3> rest = plateAxesScale(print);
+  const double grow = std::max(rest[0], rest[1]) - 1;
+  if (!(grow > 0)) return 0;
+  double diameter = 0;  // bounded by the diagonal of the unturned box
+  for (std::size_t p = 0; p < loaded.size(); ++p) {
+    const BoundingBox box = partBounds(loaded[p], job.parts[p].add.size());
+    diameter = std::max(diameter, std::hypot(double{box.max.x} - box.min.x, double{box.max.y} - box.min.y));
+  }
+  return 2 * grow * diameter * std::sqrt(0.5);
 }
 
 }  // namespace
 
 struct PreparedPlateJob::Impl {
   PlateJob job;
+  PrintSettings print;  // printer, material, corrections (profile.h)
   PlateGeometry geometry;
   std::map<std::filesystem::path, TemplateTable> tables;  // by file; the parts' adjacency spans point here
   std::vector<LoadedPart> loaded;                         // in the plate orientation
@@ -393,11 +459,15 @@ struct PreparedPlateJob::Impl {
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {
   impl_->job = std::move(given);
   const PlateJob& job = impl_->job;
-  impl_->geometry = plateGeometry(job);
+  impl_->print = resolvePrintSettings(
+      {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings"});
+  const PrintSettings& print = impl_->print;
+  impl_->geometry = plateGeometry(job, print);
   const PlateGeometry& geometry = impl_->geometry;
+  checkMaskSettings(print, job.antialias, !job.masks.empty(), "settings.antialias");
   PlateResult& result = impl_->result;
   const std::size_t count = job.parts.size();
-  std::vector<std::filesystem::path> inputs{job.sourceFile};
+  std::vector<std::filesystem::path> inputs{job.sourceFile, job.profile, print.lightMap};
   for (const PlatePart& p : job.parts) {
     inputs.push_back(p.model);
     if (!p.templateFile.empty()) inputs.push_back(p.templateFile);
@@ -407,6 +477,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   std::vector<std::filesystem::path>& outputs = impl_->outputs;
   outputs = {job.masks, job.report, job.picture};
   outputs.insert(outputs.end(), job.contours.begin(), job.contours.end());
+  std::erase_if(inputs, [](const std::filesystem::path& p) { return p.empty(); });
   for (const auto& o : outputs)
     if (!o.empty()) checkNotAnInput(o, inputs);
 
@@ -433,6 +504,14 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         part.model = readMesh(spec.model, read);
         for (const auto* list : {&spec.add, &spec.remove})
           for (const auto& path : *list) part.features.push_back(readMesh(path, read));
+        if (print.scales()) {
+          // The scaling correction that turns with the part, about its model's centre (as for a part
+          // sliced alone); the rest follows once the part is turned (below).
+          const std::array<double, 3> centre = scaleCentre(boundsOf(part.model.corners)),
+                                      factors = turningScale(print);
+          scaleCorners(part.model.corners, factors, centre);
+          for (FacetSoup& f : part.features) scaleCorners(f.corners, factors, centre);
+        }
         // The footprint covers the model and its add-ons (a removal never widens it).
         FacetSoup all = part.model;
         for (std::size_t f = 0; f < spec.add.size(); ++f)
@@ -498,7 +577,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   arrange.plateWidth = geometry.widthMm();
   arrange.plateHeight = geometry.heightMm();
   arrange.margin = job.margin;
-  arrange.spacing = job.spacing;
+  arrange.spacing = job.spacing + residualSpacing(job, loaded, print);
   arrange.rotationStep = job.rotationStep;
   Arrangement arranged;
   try {
@@ -523,6 +602,15 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
     rotateSoup(loaded[p].model, a.rotation);
     for (FacetSoup& f : loaded[p].features) rotateSoup(f, a.rotation);
     BoundingBox box = partBounds(loaded[p], job.parts[p].add.size());
+    if (const std::array<double, 3> rest = plateAxesScale(print); rest != std::array<double, 3>{1, 1, 1}) {
+      // The rest of the scaling correction, in the plate's axes, about the centre of the turned part's
+      // bounding box: the part keeps its placement.
+      const std::array<double, 3> centre{0.5 * (double{box.min.x} + box.max.x),
+                                         0.5 * (double{box.min.y} + box.max.y), box.min.z};
+      scaleCorners(loaded[p].model.corners, rest, centre);
+      for (FacetSoup& f : loaded[p].features) scaleCorners(f.corners, rest, centre);
+      box = partBounds(loaded[p], job.parts[p].add.size());
+    }
     r.plate = a.plate;
     r.arranged = !job.parts[p].placement;
     r.tx = a.tx;
@@ -534,7 +622,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         0.5 * (double{box.min.x} + box.max.x), 0.5 * (double{box.min.y} + box.max.y), a.rotation});
     r.footprintMm2 = loaded[p].footprint.area();
   }
-  checkPlacements(job, loaded, result.parts, geometry);
+  checkPlacements(job, loaded, result.parts, geometry, arrange.spacing);
 }
 
 PreparedPlateJob::~PreparedPlateJob() = default;
@@ -553,7 +641,7 @@ void PreparedPlateJob::slicePlate(uint32_t plate, const ProgressContext* progres
   for (std::size_t p = 0; p < result.parts.size(); ++p)
     if (result.parts[p].plate == plate) members.push_back(p);
   const PlateSlice s = toposlice::slicePlate(impl_->job, plate, members, impl_->loaded, result.parts,
-                                             impl_->geometry, progress);
+                                             impl_->print, impl_->geometry, progress);
   result.layers[plate] = s.layers;
   result.volumeMl[plate] = s.volumeMl;
 }
@@ -567,8 +655,11 @@ void PreparedPlateJob::writeReport() const {
     nlohmann::ordered_json j;
     j["toposlice"] = TOPOSLICE_VERSION_TEXT;
     j["job"] = job.sourceFile.string();
-    j["printer"] = job.printer;
-    j["material"] = job.material;
+    j["printer"] = impl_->print.printerName;
+    j["material"] = impl_->print.materialName;
+    j["print_settings"] = printSettingsJson(impl_->print,
+                                            "each part's own: the centre of its bounding box in x and y, "
+                                            "lowest z; x and y along the plate's axes");
     j["image"] = {{"width", geometry.width}, {"height", geometry.height}, {"pixel_mm", geometry.pixel}};
     j["layer_height_mm"] = job.layerHeight;
     j["template_reuse"] = {{"parts_checked_against_template", result.templateChecked},

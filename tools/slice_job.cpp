@@ -222,8 +222,6 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   return job;
 }
 
-namespace {
-
 // The light-uniformity map: an 8-bit grayscale PNG as the display shows it (the masks' own layout and
 // mirroring), exactly the masks' size.
 MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
@@ -240,7 +238,30 @@ MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
   return map;
 }
 
-}  // namespace
+nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre) {
+  nlohmann::ordered_json settings = nlohmann::ordered_json::object();
+  for (const auto& [key, value] : settingValues(print))
+    if (!value.empty()) settings[key] = value;
+  nlohmann::ordered_json origins = nlohmann::ordered_json::object();
+  for (const auto& [key, origin] : print.origin) origins[key] = origin;
+  const auto scale = print.scale();
+  return {{"printer", print.printerName},
+          {"material", print.materialName},
+          {"values", settings},
+          {"set_by", origins},
+          {"scale_xyz", {scale[0], scale[1], scale[2]}},
+          {"scale_centre", scaleCentre}};
+}
+
+void checkMaskSettings(const PrintSettings& print, bool antialias, bool masks, const char* antialiasName) {
+  if (print.gammaCorrection && *print.gammaCorrection == 0 && antialias)
+    throw InputError(std::string(antialiasName) +
+                     " and gamma_correction 0 (binary masks) contradict each other: give one");
+  if (!print.lightMap.empty() && masks && !antialias &&
+      !(print.gammaCorrection && *print.gammaCorrection > 0))
+    throw InputError("light_map " + print.lightMap.string() + " multiplies anti-aliased masks: add " +
+                     antialiasName + " (or gamma_correction > 0)");
+}
 
 SoupMeasures measureSoup(std::span<const Point3f> corners) {
   constexpr std::size_t kBlock = 32768;  // facets
@@ -366,13 +387,7 @@ void validateSliceOptions(const SliceJobOptions& options) {
       throw InputError(path.string() + ": unknown contour output type '" + ext +
                        "' (use .cli, .svg or .3mf)");
   }
-  const PrintSettings& print = options.print;
-  if (print.gammaCorrection && *print.gammaCorrection == 0 && options.masks.antialias)
-    throw InputError("--antialias and gamma_correction 0 (binary masks) contradict each other: give one");
-  if (!print.lightMap.empty() && !options.masks.output.empty() && !options.masks.antialias &&
-      !(print.gammaCorrection && *print.gammaCorrection > 0))
-    throw InputError("light_map " + print.lightMap.string() +
-                     " multiplies anti-aliased masks: add --antialias (or gamma_correction > 0)");
+  checkMaskSettings(options.print, options.masks.antialias, !options.masks.output.empty(), "--antialias");
   if (!options.report.empty() && lowerExtension(options.report) != ".csv")
     throw InputError(options.report.string() + ": the per-layer report is CSV: give a .csv file name");
   if (!options.summary.empty() && lowerExtension(options.summary) != ".json")
@@ -447,18 +462,7 @@ static void writeSliceSummary(const std::filesystem::path& model, const SliceJob
   for (const auto& f : options.add) features.push_back({{"role", "add"}, {"file", f.string()}});
   for (const auto& f : options.remove) features.push_back({{"role", "remove"}, {"file", f.string()}});
   j["features"] = features;
-  nlohmann::ordered_json settings = nlohmann::ordered_json::object();
-  for (const auto& [key, value] : settingValues(options.print))
-    if (!value.empty()) settings[key] = value;
-  nlohmann::ordered_json origins = nlohmann::ordered_json::object();
-  for (const auto& [key, origin] : options.print.origin) origins[key] = origin;
-  const auto scale = options.print.scale();
-  j["print_settings"] = {{"printer", options.print.printerName},
-                         {"material", options.print.materialName},
-                         {"values", settings},
-                         {"set_by", origins},
-                         {"scale_xyz", {scale[0], scale[1], scale[2]}},
-                         {"scale_centre", "bounding-box centre in x and y, lowest z"}};
+  j["print_settings"] = printSettingsJson(options.print, "bounding-box centre in x and y, lowest z");
   j["volume_ml"] = r.volumeMl;
   j["resin_mass_g"] = r.volumeMl * options.print.materialDensity;
   j["volume_source"] =

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "core/raster/rasterize.h"
 #include "io/contours/contour_sink.h"
 #include "io/jobs/profile.h"
@@ -40,6 +42,19 @@ double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& plan
 // size or pixel, or an extent that does not fit (unless o.crop).
 MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
                     const std::string& name, const std::vector<double>& planes);
+
+// The settings' mask options that contradict each other: gamma_correction 0 (binary) with anti-aliasing
+// (`antialiasName`, the option or key that asks for it), and a light map on binary masks (when `masks`).
+// Throws InputError.
+void checkMaskSettings(const PrintSettings& print, bool antialias, bool masks, const char* antialiasName);
+
+// The settings as the summary and the plate report give them: printer, material, every value that is set,
+// where each came from, the scaling factors and, in words, the centre they scale about.
+nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre);
+
+// The light-uniformity map (light_map): a grayscale PNG with the size of job's masks. Throws InputError
+// naming the file for an unreadable file, another format or another size.
+MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job);
 
 // Bounds, signed volume and degenerate facets of a soup, in parallel over fixed blocks of facets whose
 // partial sums are added in block order: the same bits for any thread count.

@@ -19,16 +19,22 @@ class PlateParser : public JsonReader {
     if (!root.is_object())
       fail("", "expected a JSON object at the top, got " + std::string(root.type_name()));
     checkKeys(root, "",
-              {"version", "description", "printer", "material", "settings", "arrange", "parts", "outputs"});
+              {"version", "description", "printer", "material", "profile", "print_settings", "settings",
+               "arrange", "parts", "outputs"});
     if (const Json* v = find(root, "version"); v && whole(*v, "version", 0, UINT32_MAX) != 1)
       fail("version", "unsupported plate job version " + v->dump() + " (this build reads 1)");
     if (const Json* v = find(root, "description")) job_.description = string(*v, "description", true);
     if (const Json* v = find(root, "printer")) job_.printer = string(*v, "printer");
     if (const Json* v = find(root, "material")) job_.material = string(*v, "material");
+    if (const Json* v = find(root, "profile")) job_.profile = input(*v, "profile");
+    if (const Json* v = find(root, "print_settings"))
+      job_.printSettings = printSettings(*v, "print_settings");
     if (const Json* v = find(root, "settings")) parseSettings(object(*v, "settings"));
     if (const Json* v = find(root, "arrange")) parseArrange(object(*v, "arrange"));
-    if (job_.printer.empty() && !(job_.pixel && job_.resolution))
-      fail("printer", "missing (give a printer preset, or settings.pixel and settings.resolution)");
+    if (job_.printer.empty() && job_.profile.empty() && !(job_.pixel && job_.resolution))
+      fail("printer",
+           "missing (give a printer preset, a profile file with its printer, or settings.pixel and "
+           "settings.resolution)");
     parseParts(require(root, "", "parts"));
     parseOutputs(object(require(root, "", "outputs"), "outputs"));
     checkOutputs();

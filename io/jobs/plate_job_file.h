@@ -11,6 +11,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 namespace toposlice {
@@ -30,8 +31,13 @@ struct PlatePart {
 
 struct PlateJob {
   std::string description;
-  std::string printer;   // preset (core/print/printer.h); required unless pixel and resolution are given
-  std::string material;  // material preset: exposure settings of the printer files, and the report
+  std::string printer;   // preset or profile; required unless a profile file has one, or pixel and resolution
+  std::string material;  // material preset or profile: exposure and corrections; empty: the file's only one
+  // Printer and material settings (io/jobs/profile.h), as in batch jobs: a profile file (JSON, relative to
+  // the job's folder) whose printers and materials `printer` and `material` may name, and overrides of
+  // any key on top. The display, corrections, exposure and gamma apply to every plate.
+  std::filesystem::path profile;
+  std::vector<std::pair<std::string, std::string>> printSettings;
   std::optional<double> pixel;                        // mm, overrides the printer's
   std::optional<std::array<uint32_t, 2>> resolution;  // pixels, overrides the printer's
   std::optional<double> buildHeight;                  // mm, overrides the printer's; 0: unchecked
