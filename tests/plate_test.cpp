@@ -278,6 +278,15 @@ TEST(ArrangeTest, AlignersNestBetterThanShelves) {
   }
 }
 
+// A scaling correction that differs in x and y acts along the plate's axes: part b, turned by 90 degrees
+// on the plate, is scaled like its mesh turned first and sliced alone.
+TEST_F(PlateTest, ScalingAlongThePlateAxesWhateverThePartsRotation) {
+  ProfileChoice choice;
+  choice.overrides = {{"relative_correction_x", "1.01"}, {"material_correction_y", "0.995"}};
+  expectPartsAsSlicedAlone(
+      R"("print_settings": {"relative_correction_x": 1.01, "material_correction_y": 0.995},)", choice);
+}
+
 // An entry of a zip archive, read with libzip (not the writer's minizip); empty when missing.
 std::string zipEntry(const fs::path& archive, const char* name) {
   int err = 0;

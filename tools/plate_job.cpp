@@ -96,16 +96,15 @@ PlateGeometry plateGeometry(const PlateJob& job, const PrintSettings& print) {
   return g;
 }
 
-// The scaling correction's part that turns with a part (the same factor in x and y, and z), and the rest,
-// applied in the plate's axes once the part is turned: their product is the correction in the printer's
-// axes, whatever the part's rotation.
-std::array<double, 3> turningScale(const PrintSettings& print) {
+// The scaling correction acts along the printer's (the plate's) axes. The same factor in x and y turns
+// with the part: it is applied when the part is read, before it is arranged. Different factors are
+// applied once the part is turned, about the centre of its turned model (one rounding either way).
+bool scalesWhenRead(const PrintSettings& print) {
   const auto s = print.scale();
-  return {std::min(s[0], s[1]), std::min(s[0], s[1]), s[2]};
+  return print.scales() && s[0] == s[1];
 }
-std::array<double, 3> plateAxesScale(const PrintSettings& print) {
-  const auto s = print.scale(), t = turningScale(print);
-  return {s[0] / t[0], s[1] / t[1], 1.0};
+bool scalesWhenTurned(const PrintSettings& print) {
+  return print.scales() && !scalesWhenRead(print);
 }
 
 // The contours of a layer moved by (tx, ty), into `out` (its capacity reused).
@@ -428,13 +427,14 @@ void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
   if (!problems.empty()) throwProblems(job, "the plate cannot be printed as given", problems);
 }
 
-// Room the footprints leave for the scaling correction applied after turning (plateAxesScale): its
-// largest factor minus 1 times the farthest any vertex can be from the centre of a turned part's
-// bounding box (half the diagonal of the box of a disc of the part's diameter), for two neighbours.
+// Room the footprints (of parts not yet scaled) leave for a scaling correction applied after turning
+// (scalesWhenTurned): its larger x/y factor minus 1 times the farthest any vertex can be from the centre
+// of a turned model's bounding box (at most half the diagonal of a square as wide as the part's
+// diameter; the model's box lies inside the part's), for two neighbours.
 double residualSpacing(const PlateJob& job, const std::vector<LoadedPart>& loaded,
                        const PrintSettings& print) {
-  const std::array<double, 3> rest = plateAxesScale(print);
-  const double grow = std::max(rest[0], rest[1]) - 1;
+  if (!scalesWhenTurned(print)) return 0;
+  const double grow = std::max(print.scale()[0], print.scale()[1]) - 1;
   if (!(grow > 0)) return 0;
   double diameter = 0;  // bounded by the diagonal of the unturned box
   for (std::size_t p = 0; p < loaded.size(); ++p) {
@@ -504,11 +504,10 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         part.model = readMesh(spec.model, read);
         for (const auto* list : {&spec.add, &spec.remove})
           for (const auto& path : *list) part.features.push_back(readMesh(path, read));
-        if (print.scales()) {
-          // The scaling correction that turns with the part, about its model's centre (as for a part
-          // sliced alone); the rest follows once the part is turned (below).
+        if (scalesWhenRead(print)) {
+          // About the model's centre, as for a part sliced alone.
           const std::array<double, 3> centre = scaleCentre(boundsOf(part.model.corners)),
-                                      factors = turningScale(print);
+                                      factors = print.scale();
           scaleCorners(part.model.corners, factors, centre);
           for (FacetSoup& f : part.features) scaleCorners(f.corners, factors, centre);
         }
@@ -601,16 +600,14 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
     const ArrangedPart& a = arranged.parts[p];
     rotateSoup(loaded[p].model, a.rotation);
     for (FacetSoup& f : loaded[p].features) rotateSoup(f, a.rotation);
-    BoundingBox box = partBounds(loaded[p], job.parts[p].add.size());
-    if (const std::array<double, 3> rest = plateAxesScale(print); rest != std::array<double, 3>{1, 1, 1}) {
-      // The rest of the scaling correction, in the plate's axes, about the centre of the turned part's
-      // bounding box: the part keeps its placement.
-      const std::array<double, 3> centre{0.5 * (double{box.min.x} + box.max.x),
-                                         0.5 * (double{box.min.y} + box.max.y), box.min.z};
-      scaleCorners(loaded[p].model.corners, rest, centre);
-      for (FacetSoup& f : loaded[p].features) scaleCorners(f.corners, rest, centre);
-      box = partBounds(loaded[p], job.parts[p].add.size());
+    if (scalesWhenTurned(print)) {
+      // Along the plate's axes, about the centre of the turned model (as for that model sliced alone).
+      const std::array<double, 3> centre = scaleCentre(boundsOf(loaded[p].model.corners)),
+                                  factors = print.scale();
+      scaleCorners(loaded[p].model.corners, factors, centre);
+      for (FacetSoup& f : loaded[p].features) scaleCorners(f.corners, factors, centre);
     }
+    BoundingBox box = partBounds(loaded[p], job.parts[p].add.size());
     r.plate = a.plate;
     r.arranged = !job.parts[p].placement;
     r.tx = a.tx;
