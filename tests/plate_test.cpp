@@ -317,6 +317,14 @@ TEST_F(PlateTest, ProfileSettingsReachThePrinterFileAndTheReport) {
                             q(kCase0) +
                             ", \"placement\": \"auto\"}],"
                             "\"outputs\": {\"masks\": \"p.sl1\", \"report\": \"r.json\"}}");
+  // --explain shows the settings the job will use and writes nothing.
+  const tool_test::RunResult explained = run({"plate", (dir_ / "job.json").string(), "--explain"});
+  ASSERT_EQ(explained.code(), 0) << explained.describe();
+  for (const char* line : {"printer    : lab\n", "material   : resin\n",
+                           "exposure   : 2.5 s, first layer 25 s, faded over 4 layers\n",
+                           "  absolute_correction        = -0.02        (plate job print_settings)\n"})
+    EXPECT_NE(explained.out.find(line), std::string::npos) << line << explained.out;
+  EXPECT_FALSE(fs::exists(dir_ / "p.sl1"));
   const tool_test::RunResult r = run({"plate", (dir_ / "job.json").string(), "-q"});
   ASSERT_EQ(r.code(), 0) << r.describe();
   const std::string config = zipEntry(dir_ / "p.sl1", "config.ini");

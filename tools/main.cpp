@@ -211,11 +211,11 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
   for (const auto& path : r.written) std::printf("wrote      : %s\n", path.c_str());
 }
 
-// --explain: the resolved printer, material and correction settings, each with where it came from, and
-// what the job will do with them; nothing is read or written.
-int explainSettings(const std::string& model, const SliceJobOptions& options) {
-  const PrintSettings& p = options.print;
-  std::printf("model      : %s\n", model.c_str());
+// The resolved printer, material and correction settings, each with where it came from, and what a job
+// will do with them (--explain). `masks`: the mask output (empty: none); `scaleCentre`: about what the
+// scaling correction scales, in words.
+void explainPrintSettings(const PrintSettings& p, const std::filesystem::path& masks, bool antialiasAsked,
+                          const char* scaleCentre) {
   std::printf("printer    : %s\n",
               p.printerName.empty() ? "(none: --resolution and --pixel)" : p.printerName.c_str());
   std::printf("material   : %s\n", p.materialName.c_str());
@@ -225,8 +225,8 @@ int explainSettings(const std::string& model, const SliceJobOptions& options) {
                 origin == p.origin.end() ? "(default)" : ("(" + origin->second + ")").c_str());
   }
   const auto scale = p.scale();
-  std::printf("scaling    : x %s, y %s, z %s about the bounding-box centre in x and y and the lowest z%s\n",
-              formatNumber(scale[0]).c_str(), formatNumber(scale[1]).c_str(), formatNumber(scale[2]).c_str(),
+  std::printf("scaling    : x %s, y %s, z %s about %s%s\n", formatNumber(scale[0]).c_str(),
+              formatNumber(scale[1]).c_str(), formatNumber(scale[2]).c_str(), scaleCentre,
               p.scales() ? "" : " (none)");
   std::printf(
       "offsets    : absolute %s mm on every layer; elephant foot %s mm on layer 0%s, sparing features "
@@ -238,11 +238,11 @@ int explainSettings(const std::string& model, const SliceJobOptions& options) {
                 .c_str()
           : "",
       formatNumber(p.elefantFootMinWidth).c_str());
-  const bool antialias = options.masks.antialias || (p.gammaCorrection && *p.gammaCorrection > 0);
-  if (options.masks.output.empty()) {
+  const bool antialias = antialiasAsked || (p.gammaCorrection && *p.gammaCorrection > 0);
+  if (masks.empty()) {
     std::printf("masks      : none (contours only: exposure, gamma and light map unused)\n");
   } else {
-    std::printf("masks      : %s, %s%s%s\n", options.masks.output.c_str(),
+    std::printf("masks      : %s, %s%s%s\n", masks.c_str(),
                 antialias ? "anti-aliased, gamma " : "binary (pixel-centre rule)",
                 antialias ? formatNumber(p.gammaCorrection.value_or(1.0)).c_str() : "",
                 p.lightMap.empty() ? "" : (", light map " + p.lightMap.string()).c_str());
@@ -250,6 +250,23 @@ int explainSettings(const std::string& model, const SliceJobOptions& options) {
                 formatNumber(p.exposureTime).c_str(), formatNumber(p.initialExposureTime).c_str(),
                 p.fadedLayers);
   }
+}
+
+// slice --explain: nothing is read or written.
+int explainSettings(const std::string& model, const SliceJobOptions& options) {
+  std::printf("model      : %s\n", model.c_str());
+  explainPrintSettings(options.print, options.masks.output, options.masks.antialias,
+                       "the bounding-box centre in x and y and the lowest z");
+  return 0;
+}
+
+// plate --explain: the job file and its profile are read and checked, no model.
+int explainPlateSettings(const std::filesystem::path& jobPath) {
+  const PlateJob job = readPlateJob(jobPath);
+  std::printf("plate job  : %s (%zu parts)\n", jobPath.c_str(), job.parts.size());
+  explainPrintSettings(plateJobSettings(job), job.masks, job.antialias,
+                       "each part's own centre (its model's bounding box in x and y, lowest z), along the "
+                       "plate's axes");
   return 0;
 }
 
@@ -453,6 +470,9 @@ int run(int argc, char** argv) {
   std::string plateOutputDir;
   plate->add_option("-O,--output-dir", plateOutputDir,
                     "Write every output into this folder (file names as in the job)");
+  bool plateExplain = false;
+  plate->add_flag("--explain", plateExplain,
+                  "Print the printer, material and correction settings the job would use, then stop");
 
   for (CLI::App* sub : {info, slice, templ, batch, preview, plate}) addCommon(sub, common);
   for (CLI::App* sub : {info, slice, templ, preview}) addMeshOptions(sub, common);
@@ -505,7 +525,9 @@ int run(int argc, char** argv) {
     if (*preview)
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
-    if (*plate) return runPlateCommand(plateJobPath, common.quiet, plateOutputDir);
+    if (*plate)
+      return plateExplain ? explainPlateSettings(plateJobPath)
+                          : runPlateCommand(plateJobPath, common.quiet, plateOutputDir);
     if (*batch) {
       gInterruptedMessage =
           "interrupted; the variants completed before the signal are kept, the others left nothing behind "

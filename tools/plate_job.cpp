@@ -456,11 +456,15 @@ struct PreparedPlateJob::Impl {
   std::vector<std::filesystem::path> outputs;  // plate 1's: masks, report, picture, contours (empty: none)
 };
 
+PrintSettings plateJobSettings(const PlateJob& job) {
+  return resolvePrintSettings(
+      {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings"});
+}
+
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {
   impl_->job = std::move(given);
   const PlateJob& job = impl_->job;
-  impl_->print = resolvePrintSettings(
-      {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings"});
+  impl_->print = plateJobSettings(job);
   const PrintSettings& print = impl_->print;
   impl_->geometry = plateGeometry(job, print);
   const PlateGeometry& geometry = impl_->geometry;

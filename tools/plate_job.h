@@ -13,6 +13,7 @@
 #include "core/mesh/mesh.h"
 #include "core/progress.h"
 #include "io/jobs/plate_job_file.h"
+#include "io/jobs/profile.h"
 
 namespace toposlice {
 
@@ -40,6 +41,10 @@ struct PlateResult {
   double readSeconds = 0, topologySeconds = 0, arrangeSeconds = 0, sliceSeconds = 0;
   std::vector<std::filesystem::path> written;
 };
+
+// The job's printer, material and corrections: its profile file (when given), printer and material, then
+// print_settings. Throws InputError for an unknown name, a bad file, key or value.
+PrintSettings plateJobSettings(const PlateJob& job);
 
 // Runs the job. Everything that can be refused is refused before any slicing: unknown printer,
 // overlapping given placements (naming both parts), parts outside the printable area or taller than
