@@ -15,7 +15,6 @@
 #include <string>
 #include <vector>
 
-#include <zip.h>
 #include <nlohmann/json.hpp>
 
 #include "tests/tool_runner.h"
@@ -459,22 +458,6 @@ TEST_F(Summary, JsonSummaryHasTheCountsVolumeAndOutputs) {
   EXPECT_TRUE(j["warnings"].empty());
   // The CSV is plain rows (no trailer), and the SL1 carries the layer height as given.
   for (const auto& line : splitLines(readBytes(path("r.csv")))) EXPECT_FALSE(line.starts_with("#")) << line;
-}
-
-// An entry of a zip archive, read with libzip (not the writer's minizip).
-std::string zipEntry(const fs::path& archive, const char* name) {
-  int err = 0;
-  zip_t* zip = zip_open(archive.c_str(), ZIP_RDONLY, &err);
-  if (zip == nullptr) return {};
-  std::string text;
-  if (zip_file_t* f = zip_fopen(zip, name, 0)) {
-    char buffer[4096];
-    for (zip_int64_t n; (n = zip_fread(f, buffer, sizeof buffer)) > 0;)
-      text.append(buffer, static_cast<std::size_t>(n));
-    zip_fclose(f);
-  }
-  zip_close(zip);
-  return text;
 }
 
 TEST_F(Summary, Sl1NumbersReadBackAsGiven) {

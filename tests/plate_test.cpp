@@ -6,7 +6,6 @@
 #include <cmath>
 #include <sstream>
 
-#include <zip.h>  // libzip: reads the SL1 back
 #include <nlohmann/json.hpp>
 
 #include "core/mesh/mesh_info.h"
@@ -31,6 +30,7 @@ using tool_test::CliToolBase;
 using tool_test::readBytes;
 using tool_test::sharedModel;
 using tool_test::toposliceBinary;
+using tool_test::zipEntry;
 namespace fs = std::filesystem;
 
 const fs::path kCase0 = sharedModel("derived/aligner_upper_case0.stl.gz");
@@ -285,22 +285,6 @@ TEST_F(PlateTest, ScalingAlongThePlateAxesWhateverThePartsRotation) {
   choice.overrides = {{"relative_correction_x", "1.01"}, {"material_correction_y", "0.995"}};
   expectPartsAsSlicedAlone(
       R"("print_settings": {"relative_correction_x": 1.01, "material_correction_y": 0.995},)", choice);
-}
-
-// An entry of a zip archive, read with libzip (not the writer's minizip); empty when missing.
-std::string zipEntry(const fs::path& archive, const char* name) {
-  int err = 0;
-  zip_t* zip = zip_open(archive.c_str(), ZIP_RDONLY, &err);
-  if (zip == nullptr) return {};
-  std::string text;
-  if (zip_file_t* f = zip_fopen(zip, name, 0)) {
-    char buffer[4096];
-    for (zip_int64_t n; (n = zip_fread(f, buffer, sizeof buffer)) > 0;)
-      text.append(buffer, static_cast<std::size_t>(n));
-    zip_fclose(f);
-  }
-  zip_close(zip);
-  return text;
 }
 
 // Through the program: the display comes from the profile file's only printer, the exposure from its

@@ -12,6 +12,7 @@
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <zip.h>  // libzip: reads archives back independently of the writers' minizip
 
 #include <algorithm>
 #include <cerrno>
@@ -127,6 +128,22 @@ inline std::vector<std::string> zipEntryNames(const std::string& zip) {
     p += 46 + nameLength + extra + comment;
   }
   return names;
+}
+
+// An entry of a zip archive, read with libzip (not the writer's minizip); empty when it is missing.
+inline std::string zipEntry(const fs::path& archive, const char* name) {
+  int err = 0;
+  zip_t* zip = zip_open(archive.c_str(), ZIP_RDONLY, &err);
+  if (zip == nullptr) return {};
+  std::string text;
+  if (zip_file_t* f = zip_fopen(zip, name, 0)) {
+    char buffer[4096];
+    for (zip_int64_t n; (n = zip_fread(f, buffer, sizeof buffer)) > 0;)
+      text.append(buffer, static_cast<std::size_t>(n));
+    zip_fclose(f);
+  }
+  zip_close(zip);
+  return text;
 }
 
 // Lit (non-zero) pixels of every PNG of a mask directory, decoded with the project's decoder.
