@@ -144,7 +144,8 @@ check "1 rank exits 1, got $rc_c" test "$rc_c" -eq 1
 check "1 rank: outputs byte-identical to the single process" same_outputs "$tmp/A" "$tmp/C"
 check "1 rank: every variant on rank 0" test "$(awk '$2 == ":" && $3 == "ok" { print $7 }' "$tmp/C.log" | sort -u)" = 0
 
-# A plate job: the four arches of examples/plate on a 70 x 40 mm plate, one arch per plate. The same job
+# A plate job: the four arches of examples/plate on a 70 x 40 mm plate, one arch per plate, with print
+# settings (scaling along the plate's x, absolute correction, elephant foot, exposure). The same job
 # file for every run (an SL1 archive is dated by its job file), outputs in P/out, moved aside after each.
 plate_dir="$tmp/P"
 mkdir -p "$plate_dir/out"
@@ -155,6 +156,8 @@ cat >"$plate_dir/job.json" <<EOF
   "description": "mpi_batch_test: the plate example on a small plate, spilling over to several plates",
   "printer": "sl1",
   "material": "default",
+  "print_settings": {"relative_correction_x": 1.01, "absolute_correction": 0.02,
+                     "elefant_foot_compensation": 0.1, "exposure_time": 5},
   "settings": {"layer_height": 0.5, "pixel": 0.1, "resolution": [700, 400]},
   "arrange": {"spacing": 2, "margin": 3, "rotation_step": 90},
   "parts": [
@@ -183,6 +186,9 @@ rc_p1=$?
 mv "$plate_dir/out" "$plate_dir/single" && mkdir "$plate_dir/out"
 check "plate: single process exits 0, got $rc_p1" test "$rc_p1" -eq 0
 check "plate: the job spills over to 4 plates" grep -q "^4 plates, 4 parts" "$tmp/P1.log"
+check "plate: print_settings reach the SL1 (expTime = 5)" python3 -c \
+  "import sys, zipfile; sys.exit('expTime = 5\n' not in zipfile.ZipFile(sys.argv[1]).read('config.ini').decode())" \
+  "$plate_dir/single/p.sl1"
 for np in 2 3; do
   run_mpi "$np" "$plate_dir/job.json" "$tmp/P$np.log" plate
   rc_p=$?
