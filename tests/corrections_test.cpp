@@ -400,6 +400,20 @@ TEST_F(CorrectionsCli, ProfileFileSettingsReachTheSl1) {
             std::string::npos)
       << ini.out;
   EXPECT_FALSE(fs::exists(path("b.sl1")));  // --explain writes nothing
+  // A batch job's settings: its profile, material and print_settings, shown by batch --explain.
+  tool_test::writeBytes(path("job.json"),
+                        R"({"template": {"model": "m.stl"}, "settings": {"layer_height": 0.05,
+      "profile": "lab.json", "printer": "lab-sl1", "material": "dental", "print_settings": {"faded_layers": 3}},
+      "variants": [{"name": "a", "model": "m.stl", "masks": "a2.sl1"}, {"name": "b", "model": "m.stl",
+      "contours": "b.cli"}]})");
+  const RunResult batch = this->run({"batch", path("job.json").string(), "--explain"});
+  ASSERT_EQ(batch.code(), 0) << batch.describe();
+  for (const char* line : {"batch job  : ", "(2 variants)\n", "printer    : lab-sl1\n",
+                           "  faded_layers               = 3            (batch job print_settings)\n",
+                           "masks      : each variant's (1 of 2 variants), binary",
+                           "exposure   : 6.5 s, first layer 30 s, faded over 3 layers\n"})
+    EXPECT_NE(batch.out.find(line), std::string::npos) << line << batch.out;
+  EXPECT_FALSE(fs::exists(path("a2.sl1")));
   const std::string summary = readBytes(path("s.json"));
   EXPECT_NE(summary.find("\"exposure_time\": \"7\""), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"material\": \"dental\""), std::string::npos) << summary;

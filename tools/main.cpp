@@ -17,6 +17,7 @@
 #include "core/print/printer.h"
 #include "core/slicing/planes.h"
 #include "io/errors.h"
+#include "io/jobs/batch_job.h"
 #include "io/jobs/profile.h"
 #include "io/jobs/template_file.h"
 #include "io/output_file.h"
@@ -260,6 +261,22 @@ int explainSettings(const std::string& model, const SliceJobOptions& options) {
   return 0;
 }
 
+// batch --explain: the job file and its profile are read and checked, no model.
+int explainBatchSettings(const std::filesystem::path& jobPath) {
+  const BatchJob job = readBatchJob(jobPath);
+  std::size_t withMasks = 0;
+  for (const BatchVariant& v : job.variants) withMasks += v.masks.empty() ? 0 : 1;
+  std::printf("batch job  : %s (%zu variants)\n", jobPath.c_str(), job.variants.size());
+  const std::string masks = withMasks == 0 ? std::string()
+                                           : "each variant's (" + std::to_string(withMasks) + " of " +
+                                                 std::to_string(job.variants.size()) + " variants)";
+  explainPrintSettings(resolvePrintSettings({job.profile, job.printer, job.material, job.printSettings,
+                                             "batch job print_settings"}),
+                       masks, job.antialias,
+                       "each variant's bounding-box centre in x and y and its lowest z");
+  return 0;
+}
+
 // plate --explain: the job file and its profile are read and checked, no model.
 int explainPlateSettings(const std::filesystem::path& jobPath) {
   const PlateJob job = readPlateJob(jobPath);
@@ -453,6 +470,9 @@ int run(int argc, char** argv) {
   CLI::App* batch = app.add_subcommand("batch", "Slice every variant of a batch job with one template table");
   std::string jobPath;
   batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
+  bool batchExplain = false;
+  batch->add_flag("--explain", batchExplain,
+                  "Print the printer, material and correction settings the job would use, then stop");
 
   CLI::App* preview = app.add_subcommand(
       "preview", "Render the model from above at an angle into a PNG, as printer files show it");
@@ -528,6 +548,7 @@ int run(int argc, char** argv) {
     if (*plate)
       return plateExplain ? explainPlateSettings(plateJobPath)
                           : runPlateCommand(plateJobPath, common.quiet, plateOutputDir);
+    if (*batch && batchExplain) return explainBatchSettings(jobPath);
     if (*batch) {
       gInterruptedMessage =
           "interrupted; the variants completed before the signal are kept, the others left nothing behind "

@@ -86,13 +86,13 @@ PlateGeometry plateGeometry(const PlateJob& job, const PrintSettings& print) {
   if (job.resolution) g.width = (*job.resolution)[0], g.height = (*job.resolution)[1];
   if (job.pixel) g.pixel = *job.pixel;
   if (job.buildHeight) g.buildHeight = *job.buildHeight;
-  const std::string printer = print.printerName.empty() ? "" : "printer '" + print.printerName + "' ";
+  const std::string where =
+      (job.sourceFile.empty() ? "" : job.sourceFile.string() + ": ") +
+      (print.printerName.empty() ? "the printer" : "printer '" + print.printerName + "'");
   if (g.width == 0 || g.height == 0)
-    throw InputError(job.sourceFile.string() + ": " + printer +
-                     "has no display size: give settings.resolution, or display_pixels_x and _y");
+    throw InputError(where + " has no display size: give settings.resolution, or display_pixels_x and _y");
   if (!(g.pixel > 0))
-    throw InputError(job.sourceFile.string() + ": " + printer +
-                     "has no fixed pixel size: give settings.pixel (mm), or display_width");
+    throw InputError(where + " has no fixed pixel size: give settings.pixel (mm), or display_width");
   return g;
 }
 
