@@ -309,6 +309,11 @@ TEST_F(PlateTest, ProfileSettingsReachThePrinterFileAndTheReport) {
                            "  absolute_correction        = -0.02        (plate job print_settings)\n"})
     EXPECT_NE(explained.out.find(line), std::string::npos) << line << explained.out;
   EXPECT_FALSE(fs::exists(dir_ / "p.sl1"));
+  const tool_test::RunResult moved =
+      run({"plate", (dir_ / "job.json").string(), "--explain", "-O", (dir_ / "o").string()});
+  EXPECT_NE(moved.out.find("masks      : " + (dir_ / "o" / "p.sl1").string() + ", binary"), std::string::npos)
+      << moved.out;
+  EXPECT_FALSE(fs::exists(dir_ / "o"));
   const tool_test::RunResult r = run({"plate", (dir_ / "job.json").string(), "-q"});
   ASSERT_EQ(r.code(), 0) << r.describe();
   const std::string config = zipEntry(dir_ / "p.sl1", "config.ini");

@@ -278,8 +278,8 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
 }
 
 // plate --explain: the job file and its profile are read and checked, no model.
-int explainPlateSettings(const std::filesystem::path& jobPath) {
-  const PlateJob job = readPlateJob(jobPath);
+int explainPlateSettings(const std::filesystem::path& jobPath, const std::filesystem::path& outputDir) {
+  const PlateJob job = readPlateCommandJob(jobPath, outputDir);
   std::printf("plate job  : %s (%zu parts)\n", jobPath.c_str(), job.parts.size());
   explainPrintSettings(plateJobSettings(job), job.masks, job.antialias,
                        "each part's own centre (its model's bounding box in x and y, lowest z), along the "
@@ -546,7 +546,7 @@ int run(int argc, char** argv) {
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
     if (*plate)
-      return plateExplain ? explainPlateSettings(plateJobPath)
+      return plateExplain ? explainPlateSettings(plateJobPath, plateOutputDir)
                           : runPlateCommand(plateJobPath, common.quiet, plateOutputDir);
     if (*batch && batchExplain) return explainBatchSettings(jobPath);
     if (*batch) {

@@ -720,14 +720,19 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
   return std::move(result);
 }
 
-int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
-                    const std::filesystem::path& outputDir) {
+PlateJob readPlateCommandJob(const std::filesystem::path& jobPath, const std::filesystem::path& outputDir) {
   PlateJob job = readPlateJob(jobPath);
   if (!outputDir.empty()) {
     for (auto* path : {&job.masks, &job.report, &job.picture})
       if (!path->empty()) *path = outputDir / path->filename();
     for (auto& path : job.contours) path = outputDir / path.filename();
   }
+  return job;
+}
+
+int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
+                    const std::filesystem::path& outputDir) {
+  const PlateJob job = readPlateCommandJob(jobPath, outputDir);
   ThreadLimit threads(job.threads);
   const PlateResult r = runPlateJob(job, nullptr);
   if (!quiet) printPlateSummary(stdout, r);

@@ -89,6 +89,10 @@ class PreparedPlateJob {
 // The summary `toposlice plate` prints: plates, one line per part, the outputs written, the seconds.
 void printPlateSummary(std::FILE* out, const PlateResult& result);
 
+// The job as the command runs it: read, and with a non-empty `outputDir` every output moved there under
+// its file name.
+PlateJob readPlateCommandJob(const std::filesystem::path& jobPath, const std::filesystem::path& outputDir);
+
 // The command: reads the job, runs it with job.threads, prints the per-part table; returns 0. A
 // non-empty `outputDir` puts every output there under its file name (instead of where the job says).
 int runPlateCommand(const std::filesystem::path& jobPath, bool quiet, const std::filesystem::path& outputDir);
