@@ -288,8 +288,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     if (!job.picture.empty()) s.picture.reset(geometry.width, geometry.height);
   }
   std::vector<double> partVolume(partCount, 0.0);
-  double plateArea = 0, volumeMm3 = 0;
-  uint64_t loops = 0;
+  double volumeMm3 = 0;
 
   LayerStages stages;
   stages.process = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
@@ -335,23 +334,20 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours>, std::size_t slot, uint32_t position) {
     const LayerResult& r = slots[slot].layers[position];
-    const std::vector<LayerContours>& placed = r.moved;
-    for (auto& sink : sinks) sink->writeLayer(k, placed);
+    for (auto& sink : sinks) sink->writeLayer(k, r.moved);
     if (maskSink) maskSink->writeEncodedLayer(k, planes[k], r.encoded);
     for (std::size_t m = 0; m < partCount; ++m) {
       PlatePartResult& part = results[members[m]];
       partVolume[m] += r.partArea[m] * job.layerHeight;
       bool any = false;
-      for (std::size_t i = 0; i < placed.size(); ++i)
-        any = any || (owner[i] == m && placed[i].loopCount() > 0);
+      for (std::size_t i = 0; i < r.moved.size(); ++i)
+        any = any || (owner[i] == m && r.moved[i].loopCount() > 0);
       if (any) {
         if (part.firstLayer < 0) part.firstLayer = k;
         part.lastLayer = k;
       }
     }
-    for (const LayerContours& c : placed) loops += c.loopCount();
     volumeMm3 += r.area * job.layerHeight;
-    plateArea = std::max(plateArea, r.area);
   };
   ProgressContext context = progress ? *progress : ProgressContext{};
   context.cancel = &interruptRequested();
