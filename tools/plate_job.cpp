@@ -217,7 +217,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   const bool masks = !job.masks.empty();
   MaskJob maskJob;
   std::unique_ptr<MaskSink> maskSink;
-  MaskImage lightMap;
+  MaskTransfer transfer;  // gamma and the light-uniformity map of every mask
   if (masks) {
     MaskOptions o;
     o.printer = print.printerName;
@@ -252,15 +252,11 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     maskJob.previewRunner = parallelChunkRunner();
     maskSink = makeMaskSink(out, maskJob, job.overwrite);
     maskJob.previewModel = {};
-    if (!print.lightMap.empty()) lightMap = readLightMap(print.lightMap, maskJob);
+    transfer = maskTransfer(print, maskJob);
   }
-  const bool gamma = masks && maskJob.antiAliased && print.gammaCorrection && *print.gammaCorrection != 1.0;
-  const std::array<uint8_t, 256> gammaLut = gammaTable(gamma ? *print.gammaCorrection : 1.0);
   // Absolute correction and elephant foot, part by part on its solid region (model, add-ons, removals):
   // every output sees the corrected parts, as a part sliced alone would be corrected.
-  const bool correcting = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
-  const auto elephantFootLayers =
-      static_cast<uint32_t>(std::clamp<std::size_t>(planes.size(), 1, print.elephantFootFadeLayers()));
+  const bool correcting = correctsLayers(print);
 
   SliceSettings settings;
   if (!job.method.empty()) parseSliceMethod(job.method, settings.method);
@@ -298,9 +294,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     std::fill(r.partArea.begin(), r.partArea.end(), 0.0);
     if (correcting) {
       // Each part corrected where it was sliced, then moved: the same loops as the part corrected alone.
-      const LayerCorrection correction{print.absoluteCorrection,
-                                       elephantFootAt(k, print.elefantFootCompensation, elephantFootLayers),
-                                       print.elefantFootMinWidth};
+      const LayerCorrection correction = layerCorrection(print, k, planes.size());
       for (std::size_t m = 0; m < partCount; ++m) {
         const std::size_t first = partStart[m], end = m + 1 < partCount ? partStart[m + 1] : layer.size();
         s.sets.clear();
@@ -326,8 +320,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
       for (const double a : r.partArea) r.area += a;
       return;
     }
-    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, gamma ? gammaLut.data() : nullptr,
-                                lightMap.pixels.empty() ? nullptr : &lightMap);
+    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, &transfer);
     if (!job.picture.empty() && (k % pictureEvery == 0 || k + 1 == planes.size()))
       s.picture.add(s.mask, maskJob.grid);
     maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);

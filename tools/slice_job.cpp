@@ -222,6 +222,8 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   return job;
 }
 
+namespace {
+
 // The light-uniformity map: an 8-bit grayscale PNG as the display shows it (the masks' own layout and
 // mirroring), exactly the masks' size.
 MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
@@ -236,6 +238,27 @@ MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
                      std::to_string(map.height) + " pixels, the masks " + std::to_string(job.grid.width) +
                      "x" + std::to_string(job.grid.height) + ": it must have the display's size");
   return map;
+}
+
+}  // namespace
+
+MaskTransfer maskTransfer(const PrintSettings& print, const MaskJob& job) {
+  MaskTransfer t;
+  t.gamma = job.antiAliased && print.gammaCorrection && *print.gammaCorrection != 1.0;
+  if (t.gamma) t.gammaTable = gammaTable(*print.gammaCorrection);
+  if (!print.lightMap.empty()) t.lightMap = readLightMap(print.lightMap, job);
+  return t;
+}
+
+bool correctsLayers(const PrintSettings& print) {
+  return print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+}
+
+LayerCorrection layerCorrection(const PrintSettings& print, uint32_t k, std::size_t layers) {
+  const auto footLayers =
+      static_cast<uint32_t>(std::clamp<std::size_t>(layers, 1, print.elephantFootFadeLayers()));
+  return {print.absoluteCorrection, elephantFootAt(k, print.elefantFootCompensation, footLayers),
+          print.elefantFootMinWidth};
 }
 
 nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre) {
@@ -293,15 +316,16 @@ SoupMeasures measureSoup(std::span<const Point3f> corners) {
 }
 
 double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
-                          RasterScratch& scratch, const uint8_t* gammaMap, const MaskImage* lightMap) {
+                          RasterScratch& scratch, const MaskTransfer* transfer) {
   if (job.antiAliased) {
     // Gamma is applied as the values are written (no second pass); the area is taken after gamma and
     // before the light map, which dims the light, not the part.
     uint64_t valueSum = 0;  // maskArea without a pass over the image
-    CoverageTransfer transfer;
-    transfer.table = gammaMap;
-    rasterizeCoverage(sets, job.grid, mask, scratch, &valueSum, gammaMap != nullptr ? &transfer : nullptr);
-    if (lightMap != nullptr) applyLightMap(mask, *lightMap);
+    const bool gamma = transfer != nullptr && transfer->gamma;
+    CoverageTransfer coverage;
+    coverage.table = gamma ? transfer->gammaTable.data() : nullptr;
+    rasterizeCoverage(sets, job.grid, mask, scratch, &valueSum, gamma ? &coverage : nullptr);
+    if (transfer != nullptr && !transfer->lightMap.pixels.empty()) applyLightMap(mask, transfer->lightMap);
     return static_cast<double>(valueSum) / 255.0 * job.grid.pixel * job.grid.pixel;
   }
   uint64_t lit = 0;
@@ -588,7 +612,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const bool masks = !options.masks.output.empty();
   MaskJob maskJob;
   std::unique_ptr<MaskSink> maskSink;
-  MaskImage lightMap;  // light-uniformity map: a grayscale PNG of the display, the size of every mask
+  MaskTransfer transfer;  // gamma and the light-uniformity map of every mask
   std::unique_ptr<LayerReport> report;
   OutputTransaction* const outputs = OutputTransaction::current();
   const auto setUpOutputs = [&] {
@@ -632,12 +656,10 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
       maskJob.previewModel = {};
     }
-    if (masks && !print.lightMap.empty()) lightMap = readLightMap(print.lightMap, maskJob);
+    if (masks) transfer = maskTransfer(print, maskJob);
     if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
   };
   parallelInvoke(topology, setUpOutputs);
-  const bool gamma = masks && maskJob.antiAliased && print.gammaCorrection && *print.gammaCorrection != 1.0;
-  const std::array<uint8_t, 256> gammaLut = gammaTable(gamma ? *print.gammaCorrection : 1.0);
 
   std::vector<SliceMesh> meshes{{soup.corners, adjacency}};
   for (std::size_t i = 0; i < features.size(); ++i) meshes.push_back({features[i].corners, featureTables[i]});
@@ -670,11 +692,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   // Per-layer area and islands feed the masks (the archive's resin volume) and the report; a contour-only
   // run without a report prints no volume, so it skips that pass over every point.
   const bool measureLayers = masks || report || !options.summary.empty();
-  const bool correcting = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+  const bool correcting = correctsLayers(print);
   const bool polygonsNeeded = !sinks.empty() || report != nullptr;  // outputs made of the corrected loops
-  // PrusaSlicer fades the elephant foot over min(layer count, faded layers).
-  const auto elephantFootLayers =
-      static_cast<uint32_t>(std::clamp<std::size_t>(planes.size(), 1, print.elephantFootFadeLayers()));
   stages.process = [&](uint32_t k, std::span<const LayerContours> sliced, std::size_t slot,
                        uint32_t position) {
     SlotState& s = slots[slot];
@@ -683,9 +702,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (correcting) {
       // Absolute correction and elephant foot on the layer's solid region (model, add-ons and removals
       // under the positive rule): every output below and in consume sees the corrected layer.
-      const LayerCorrection correction{print.absoluteCorrection,
-                                       elephantFootAt(k, print.elefantFootCompensation, elephantFootLayers),
-                                       print.elefantFootMinWidth};
+      const LayerCorrection correction = layerCorrection(print, k, planes.size());
       r.corrected.resize(sliced.size());
       s.sets.clear();
       for (std::size_t i = 0; i < sliced.size(); ++i)
@@ -726,8 +743,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     else
       for (std::size_t i = 0; i < layer.size(); ++i)
         s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
-    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, gamma ? gammaLut.data() : nullptr,
-                                lightMap.pixels.empty() ? nullptr : &lightMap);
+    r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, &transfer);
     maskSink->encodeLayer(k, planes[k], s.mask, r.encoded, s.encodeScratch);
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,

@@ -2,6 +2,8 @@
 // output sinks, the mask grid and rasterizing one layer's contour sets. Defined in slice_job.cpp.
 #pragma once
 
+#include <array>
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <span>
@@ -14,6 +16,7 @@
 #include "io/contours/contour_sink.h"
 #include "io/jobs/profile.h"
 #include "io/masks/mask_sink.h"
+#include "offset/polygon_offset.h"
 #include "tools/slice_job.h"
 
 namespace toposlice {
@@ -52,9 +55,22 @@ void checkMaskSettings(const PrintSettings& print, bool antialias, bool masks, c
 // where each came from, the scaling factors and, in words, the centre they scale about.
 nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre);
 
-// The light-uniformity map (light_map): a grayscale PNG with the size of job's masks. Throws InputError
-// naming the file for an unreadable file, another format or another size.
-MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job);
+// What the settings do to every mask of `job` as it is rasterized (anti-aliased masks only): the gamma
+// table, when gamma_correction is set and not 1, and the light-uniformity map, read from light_map (a
+// grayscale PNG of the masks' size). Throws InputError naming the light map's file for an unreadable
+// file, another format or another size.
+struct MaskTransfer {
+  std::array<uint8_t, 256> gammaTable{};
+  bool gamma = false;
+  MaskImage lightMap;  // empty: none
+};
+MaskTransfer maskTransfer(const PrintSettings& print, const MaskJob& job);
+
+// The absolute correction and elephant foot (offset/polygon_offset.h) of layer k of a job of `layers`
+// layers: the foot fades over min(layers, the fade layers), as PrusaSlicer does. correctsLayers: whether
+// any layer is offset at all.
+bool correctsLayers(const PrintSettings& print);
+LayerCorrection layerCorrection(const PrintSettings& print, uint32_t k, std::size_t layers);
 
 // Bounds, signed volume and degenerate facets of a soup, in parallel over fixed blocks of facets whose
 // partial sums are added in block order: the same bits for any thread count.
@@ -75,10 +91,9 @@ struct MaskSlotScratch {
 };
 
 // Rasterizes the sets onto job.grid (binary or anti-aliased as the job says) into `mask`; returns the
-// lit area in mm^2. Anti-aliased only: `gammaMap` (256 entries) maps the coverage as it is written, and
-// `lightMap` then multiplies the values (the area is taken before it).
+// lit area in mm^2. Anti-aliased only: the transfer's gamma table maps the coverage as it is written, and
+// its light map then multiplies the values (the area is taken before it).
 double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
-                          RasterScratch& scratch, const uint8_t* gammaMap = nullptr,
-                          const MaskImage* lightMap = nullptr);
+                          RasterScratch& scratch, const MaskTransfer* transfer = nullptr);
 
 }  // namespace toposlice
