@@ -49,6 +49,11 @@ bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
                      [](const auto& p) { return std::filesystem::exists(p); });
 }
 
+PrintSettings batchJobSettings(const BatchJob& job) {
+  return resolvePrintSettings(
+      {job.profile, job.printer, job.material, job.printSettings, "batch job print_settings"});
+}
+
 SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,
                                   const TemplateTable& table) {
   SliceJobOptions o;
@@ -76,8 +81,7 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
   o.masks.mirrorX = job.mirrorX.value_or(false);
   o.masks.mirrorY = job.mirrorY.value_or(false);
   o.masks.antialias = job.antialias;
-  o.print = resolvePrintSettings(
-      {job.profile, job.printer, job.material, job.printSettings, "batch job print_settings"});
+  o.print = batchJobSettings(job);
   o.add = variant.add;
   o.remove = variant.remove;
   o.report = variant.report;

@@ -38,6 +38,10 @@ std::vector<std::filesystem::path> batchVariantOutputs(const BatchVariant& varia
 // is skipped as complete.
 bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant);
 
+// The job's printer, material and corrections: its profile file (when given), printer and material, then
+// print_settings. Throws InputError for an unknown name, a bad file, key or value.
+PrintSettings batchJobSettings(const BatchJob& job);
+
 // The runSliceJob options for one variant: the job's planes (default layer height 0.05 mm when none is
 // given), method, join tolerance, overwrite, mask settings, features and report, with `table` as the
 // template. Throws InputError for an unknown method.

@@ -25,6 +25,7 @@
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
 #include "tools/batch_command.h"
+#include "tools/batch_plan.h"
 #include "tools/plate_job.h"
 #include "tools/progress_bar.h"
 #include "tools/slice_job.h"
@@ -270,9 +271,7 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
   const std::string masks = withMasks == 0 ? std::string()
                                            : "each variant's (" + std::to_string(withMasks) + " of " +
                                                  std::to_string(job.variants.size()) + " variants)";
-  explainPrintSettings(resolvePrintSettings({job.profile, job.printer, job.material, job.printSettings,
-                                             "batch job print_settings"}),
-                       masks, job.antialias,
+  explainPrintSettings(batchJobSettings(job), masks, job.antialias,
                        "each variant's bounding-box centre in x and y and its lowest z");
   return 0;
 }
