@@ -2,6 +2,7 @@
 
 #include <polyclipping/clipper.hpp>
 
+#include <algorithm>
 #include <cmath>
 
 namespace toposlice {
@@ -55,10 +56,13 @@ Paths solidRegion(std::span<const ContourSet> sets, bool growOnly) {
   return clean;
 }
 
+Paths grow(const Paths& region, double mm);
+
 // Clean, oriented polygons grown by `mm` (shrunk when negative); Clipper unions the pieces.
 Paths offset(const Paths& region, double mm) {
   if (region.empty()) return {};
   if (mm == 0) return region;
+  if (mm > 0) return grow(region, mm);
   ClipperLib::ClipperOffset offsetter(kMiterLimit);
   // Vertices within kCleanMm of their neighbours' line go first: dense, nearly straight outlines of
   // fine meshes otherwise make the offset's self-intersection pass the slowest step by far.
@@ -91,52 +95,149 @@ Paths compensateElephantFoot(const Paths& solid, double shrink, double minWidth)
   return combine(shrunk, roots, ClipperLib::ctUnion);
 }
 
+// std::llround, exactly, without the library call: v - trunc(v) is exact in double precision.
+cInt roundToUnits(double mm) {
+  const double v = mm * kOffsetUnitsPerMm;
+  const cInt t = static_cast<cInt>(v);
+  const double f = v - static_cast<double>(t);
+  return t + static_cast<cInt>(f >= 0.5) - static_cast<cInt>(f <= -0.5);
+}
+
+// ClipperLib::CleanPolygon (Clipper 6.4.2), re-derived on index links instead of a heap-allocated
+// node list: the same tests in the same order, so the same points. Appends the cleaned loop to `out`.
+class LoopCleaner {
+ public:
+  void clean(std::span<const IntPoint> in, double distance, std::vector<IntPoint>& out) {
+    std::size_t size = in.size();
+    if (size == 0) return;
+    next_.resize(size);
+    prev_.resize(size);
+    done_.assign(size, 0);
+    for (std::size_t i = 0; i < size; ++i) {
+      next_[i] = static_cast<uint32_t>(i + 1 == size ? 0 : i + 1);
+      prev_[i] = static_cast<uint32_t>(i == 0 ? size - 1 : i - 1);
+    }
+    const double distSqrd = distance * distance;
+    uint32_t op = 0;
+    while (done_[op] == 0 && next_[op] != prev_[op]) {
+      const IntPoint& p = in[op];
+      const IntPoint& before = in[prev_[op]];
+      const IntPoint& after = in[next_[op]];
+      if (close(p, before, distSqrd)) {
+        op = exclude(op);
+        --size;
+      } else if (close(before, after, distSqrd)) {
+        exclude(next_[op]);
+        op = exclude(op);
+        size -= 2;
+      } else if (nearlyCollinear(before, p, after, distSqrd)) {
+        op = exclude(op);
+        --size;
+      } else {
+        done_[op] = 1;
+        op = next_[op];
+      }
+    }
+    if (size < 3) return;
+    for (std::size_t i = 0; i < size; ++i, op = next_[op]) out.push_back(in[op]);
+  }
+
+ private:
+  uint32_t exclude(uint32_t op) {
+    const uint32_t result = prev_[op];
+    next_[result] = next_[op];
+    prev_[next_[op]] = result;
+    done_[result] = 0;
+    return result;
+  }
+
+  static bool close(const IntPoint& a, const IntPoint& b, double distSqrd) {
+    const double dx = static_cast<double>(a.X) - static_cast<double>(b.X);
+    const double dy = static_cast<double>(a.Y) - static_cast<double>(b.Y);
+    return dx * dx + dy * dy <= distSqrd;
+  }
+
+  // Clipper's DistanceFromLineSqrd(p, l1, l2) < distSqrd, that is fl(c^2 / (a^2 + b^2)) < distSqrd: decided
+  // by a product where the two sides are more than 1e-12 apart (rounding moves each by far less), by
+  // the same division otherwise.
+  static bool nearLine(const IntPoint& p, const IntPoint& l1, const IntPoint& l2, double distSqrd) {
+    const double a = static_cast<double>(l1.Y - l2.Y);
+    const double b = static_cast<double>(l2.X - l1.X);
+    double c = a * static_cast<double>(l1.X) + b * static_cast<double>(l1.Y);
+    c = a * static_cast<double>(p.X) + b * static_cast<double>(p.Y) - c;
+    const double numerator = c * c, denominator = a * a + b * b, bound = distSqrd * denominator;
+    if (numerator < bound * (1 - 1e-12)) return true;
+    if (numerator > bound * (1 + 1e-12)) return false;
+    return numerator / denominator < distSqrd;
+  }
+
+  // The distance is measured from whichever of the three points lies between the other two.
+  static bool nearlyCollinear(const IntPoint& p1, const IntPoint& p2, const IntPoint& p3, double distSqrd) {
+    if (std::abs(p1.X - p2.X) > std::abs(p1.Y - p2.Y)) {
+      if ((p1.X > p2.X) == (p1.X < p3.X)) return nearLine(p1, p2, p3, distSqrd);
+      if ((p2.X > p1.X) == (p2.X < p3.X)) return nearLine(p2, p1, p3, distSqrd);
+      return nearLine(p3, p1, p2, distSqrd);
+    }
+    if ((p1.Y > p2.Y) == (p1.Y < p3.Y)) return nearLine(p1, p2, p3, distSqrd);
+    if ((p2.Y > p1.Y) == (p2.Y < p3.Y)) return nearLine(p2, p1, p3, distSqrd);
+    return nearLine(p3, p1, p2, distSqrd);
+  }
+
+  std::vector<uint32_t> next_, prev_;
+  std::vector<uint8_t> done_;
+};
+
 // The result of ClipperOffset::Execute before its union, for closed polygons and mitred joins
 // (Clipper 6.4's ClipperOffset: AddPath, FixOrientations, DoOffset, OffsetPoint, DoMiter, DoSquare),
-// re-derived here: the same points in the same order.
+// re-derived here: the same points in the same order. Paths are kept in one flat array, so that a
+// thread reusing the object allocates nothing once it has seen its largest layer.
 class RawOffset {
  public:
-  RawOffset(double delta, double miterLimit)
-      : delta_(delta), miterBound_(miterLimit > 2 ? 2 / (miterLimit * miterLimit) : 0.5) {}
+  void reset(double delta, double miterLimit) {
+    delta_ = delta;
+    miterBound_ = miterLimit > 2 ? 2 / (miterLimit * miterLimit) : 0.5;
+    points_.clear();
+    starts_.assign(1, 0);
+    hasLowest_ = false;
+  }
 
   // AddPath: consecutive duplicates (and a last point equal to the first) dropped; fewer than three
   // points left: nothing. Also tracks the lowest point (largest y, then smallest x) of all paths.
-  void add(const Path& path) {
+  void add(std::span<const IntPoint> path) {
     std::size_t last = path.size();
     while (last > 1 && path[0] == path[last - 1]) --last;
     if (last < 3) return;
-    Path clean;
-    clean.reserve(last);
-    clean.push_back(path[0]);
-    std::size_t lowest = 0;
+    const std::size_t first = points_.size();
+    points_.push_back(path[0]);
+    std::size_t lowest = first;
     for (std::size_t i = 1; i < last; ++i) {
-      if (path[i] == clean.back()) continue;
-      clean.push_back(path[i]);
-      if (lower(path[i], clean[lowest])) lowest = clean.size() - 1;
+      if (path[i] == points_.back()) continue;
+      points_.push_back(path[i]);
+      if (lower(path[i], points_[lowest])) lowest = points_.size() - 1;
     }
-    if (clean.size() < 3) return;
-    const IntPoint p = clean[lowest];
+    if (points_.size() - first < 3) {
+      points_.resize(first);
+      return;
+    }
+    const IntPoint p = points_[lowest];
     if (!hasLowest_ || lower(p, lowestPoint_)) {
       hasLowest_ = true;
       lowestPoint_ = p;
-      lowestPath_ = paths_.size();
+      lowestPath_ = starts_.size() - 1;
     }
-    paths_.push_back(std::move(clean));
+    starts_.push_back(static_cast<uint32_t>(points_.size()));
   }
 
-  // FixOrientations, then DoOffset for every path.
-  void build(Paths& out) {
-    if (hasLowest_ && !ClipperLib::Orientation(paths_[lowestPath_]))
-      for (Path& p : paths_) ClipperLib::ReversePath(p);
-    for (const Path& src : paths_) {
-      const std::size_t n = src.size();
-      normals_.resize(n);
-      for (std::size_t j = 0; j < n; ++j) normals_[j] = unitNormal(src[j], src[j + 1 == n ? 0 : j + 1]);
-      Path dest;
-      dest.reserve(n + n / 2);
-      std::size_t k = n - 1;
-      for (std::size_t j = 0; j < n; ++j) offsetPoint(src, j, k, dest);
-      out.push_back(std::move(dest));
+  // FixOrientations, then DoOffset for every path with its concave corners trimmed: each loop, in
+  // integer units, goes to sink(const Path&).
+  template <class Sink>
+  void build(Sink&& sink) {
+    fixOrientations();
+    for (std::size_t i = 0; i + 1 < starts_.size(); ++i) {
+      const std::span<const IntPoint> src = path(i);
+      offsetPath(src);
+      trim(src);
+      if (trimmed_.size() >= 3) sink(trimmed_);
     }
   }
 
@@ -144,6 +245,16 @@ class RawOffset {
   struct Normal {
     double x, y;
   };
+  struct Trim {
+    double x = 0, y = 0;     // the crossing of the two moved edges
+    double in = 0, out = 0;  // the length of moved edge before and after it that the trim removes
+    double edgeOut = 0;      // the original edge after the corner
+    bool ok = false;
+  };
+
+  std::span<const IntPoint> path(std::size_t i) const {
+    return std::span<const IntPoint>(points_).subspan(starts_[i], starts_[i + 1] - starts_[i]);
+  }
 
   static Normal unitNormal(const IntPoint& a, const IntPoint& b) {
     if (a.X == b.X && a.Y == b.Y) return {0, 0};
@@ -159,17 +270,45 @@ class RawOffset {
 
   static cInt round(double v) { return v < 0 ? static_cast<cInt>(v - 0.5) : static_cast<cInt>(v + 0.5); }
 
+  // ClipperLib::Area's sum, in its order: the orientation Clipper tests on the lowest path.
+  static bool positive(std::span<const IntPoint> poly) {
+    double a = 0;
+    for (std::size_t i = 0, j = poly.size() - 1; i < poly.size(); j = i++)
+      a += (static_cast<double>(poly[j].X) + static_cast<double>(poly[i].X)) *
+           (static_cast<double>(poly[j].Y) - static_cast<double>(poly[i].Y));
+    return -a * 0.5 >= 0;
+  }
+
+  void fixOrientations() {
+    if (hasLowest_ && !positive(path(lowestPath_)))
+      for (std::size_t i = 0; i + 1 < starts_.size(); ++i)
+        std::reverse(points_.begin() + starts_[i], points_.begin() + starts_[i + 1]);
+    hasLowest_ = false;  // once
+  }
+
   IntPoint moved(const IntPoint& p, double x, double y) const {
     return IntPoint(round(static_cast<double>(p.X) + x), round(static_cast<double>(p.Y) + y));
   }
 
-  void offsetPoint(const Path& src, std::size_t j, std::size_t& k, Path& dest) const {
+  // DoOffset of one closed path into dest_, noting each point's source vertex and each concave detour.
+  void offsetPath(std::span<const IntPoint> src) {
+    const std::size_t n = src.size();
+    normals_.resize(n);
+    for (std::size_t j = 0; j < n; ++j) normals_[j] = unitNormal(src[j], src[j + 1 == n ? 0 : j + 1]);
+    dest_.clear();
+    detours_.clear();
+    corners_.clear();
+    std::size_t k = n - 1;
+    for (std::size_t j = 0; j < n; ++j) offsetPoint(src, j, k);
+  }
+
+  void offsetPoint(std::span<const IntPoint> src, std::size_t j, std::size_t& k) {
     const Normal nk = normals_[k], nj = normals_[j];
     const IntPoint& p = src[j];
     double sinA = nk.x * nj.y - nj.x * nk.y;
     if (std::fabs(sinA * delta_) < 1.0) {
       if (nk.x * nj.x + nj.y * nk.y > 0) {  // nearly straight on: one point, and k stays (as in Clipper)
-        dest.push_back(moved(p, nk.x * delta_, nk.y * delta_));
+        dest_.push_back(moved(p, nk.x * delta_, nk.y * delta_));
         return;
       }
     } else if (sinA > 1.0) {
@@ -178,30 +317,150 @@ class RawOffset {
       sinA = -1.0;
     }
     if (sinA * delta_ < 0) {  // concave: through the vertex
-      dest.push_back(moved(p, nk.x * delta_, nk.y * delta_));
-      dest.push_back(p);
-      dest.push_back(moved(p, nj.x * delta_, nj.y * delta_));
+      detours_.push_back(static_cast<uint32_t>(dest_.size()));
+      corners_.push_back(static_cast<uint32_t>(j));
+      dest_.push_back(moved(p, nk.x * delta_, nk.y * delta_));
+      dest_.push_back(p);
+      dest_.push_back(moved(p, nj.x * delta_, nj.y * delta_));
     } else {
       const double r = 1 + (nj.x * nk.x + nj.y * nk.y);
       if (r >= miterBound_) {  // mitre
         const double q = delta_ / r;
-        dest.push_back(moved(p, (nk.x + nj.x) * q, (nk.y + nj.y) * q));
+        dest_.push_back(moved(p, (nk.x + nj.x) * q, (nk.y + nj.y) * q));
       } else {  // squared off
         const double dx = std::tan(std::atan2(sinA, nk.x * nj.x + nk.y * nj.y) / 4);
-        dest.push_back(moved(p, delta_ * (nk.x - nk.y * dx), delta_ * (nk.y + nk.x * dx)));
-        dest.push_back(moved(p, delta_ * (nj.x + nj.y * dx), delta_ * (nj.y - nj.x * dx)));
+        dest_.push_back(moved(p, delta_ * (nk.x - nk.y * dx), delta_ * (nk.y + nk.x * dx)));
+        dest_.push_back(moved(p, delta_ * (nj.x + nj.y * dx), delta_ * (nj.y - nj.x * dx)));
       }
     }
     k = j;
   }
 
-  double delta_, miterBound_;
-  std::vector<Path> paths_;
+  // A concave corner's detour b, v, a (b the end of the edge before v moved out, a the start of the edge
+  // after it) leaves a small loop X -> b -> v -> a -> X, where X is the crossing of the two moved edges.
+  // Replacing the detour by X removes that loop and keeps the positive-winding region
+  // (docs/DESIGN.md, "Growing by trimmed raw loops"), where the corner's trims fit its edges: X lies on both
+  // moved edges; the trims at the two ends of one edge do not overlap; and the reach of the corner,
+  // d max(tan(phi / 2), sin(phi)) for a turn of phi, the farthest along an edge that the trimmed-away
+  // ends of the other edge fall, stays within both original edges.
+  void trim(std::span<const IntPoint> src) {
+    const std::size_t m = dest_.size();
+    if (detours_.empty() || m < 6) {
+      trimmed_ = dest_;
+      return;
+    }
+    // Pass 1: each detour's crossing, trims and reach.
+    trims_.assign(detours_.size(), Trim{});
+    for (std::size_t t = 0; t < detours_.size(); ++t) {
+      const std::size_t i = detours_[t];
+      const IntPoint& A = dest_[i == 0 ? m - 1 : i - 1];
+      const IntPoint& b = dest_[i];
+      const IntPoint& v = dest_[i + 1];
+      const IntPoint& a = dest_[i + 2];
+      const IntPoint& B = dest_[i + 3 >= m ? i + 3 - m : i + 3];
+      const double d1x = static_cast<double>(b.X - A.X), d1y = static_cast<double>(b.Y - A.Y);
+      const double d2x = static_cast<double>(B.X - a.X), d2y = static_cast<double>(B.Y - a.Y);
+      const double cross = d1x * d2y - d1y * d2x;
+      if (!(std::fabs(cross) > 0)) continue;
+      const double ex = static_cast<double>(a.X - A.X), ey = static_cast<double>(a.Y - A.Y);
+      const double s = (ex * d2y - ey * d2x) / cross;  // along A -> b
+      const double u = (ex * d1y - ey * d1x) / cross;  // along a -> B
+      if (!(s > 0 && s < 1 && u > 0 && u < 1)) continue;
+      const double len1 = std::sqrt(d1x * d1x + d1y * d1y), len2 = std::sqrt(d2x * d2x + d2y * d2y);
+      Trim& corner = trims_[t];
+      corner.x = static_cast<double>(A.X) + s * d1x;
+      corner.y = static_cast<double>(A.Y) + s * d1y;
+      corner.in = (1 - s) * len1;
+      corner.out = u * len2;
+      // Every vertex adds at least one point, so A comes from the vertex before and B from the one after.
+      const std::size_t j = corners_[t], n = src.size();
+      const IntPoint& before = src[j == 0 ? n - 1 : j - 1];
+      const IntPoint& after = src[j + 1 == n ? 0 : j + 1];
+      const double bx = static_cast<double>(v.X - before.X), by = static_cast<double>(v.Y - before.Y);
+      const double ax = static_cast<double>(after.X - v.X), ay = static_cast<double>(after.Y - v.Y);
+      const double edgeIn = std::sqrt(bx * bx + by * by);
+      corner.edgeOut = std::sqrt(ax * ax + ay * ay);
+      // 1 unit of slack for the rounding of b and a to whole units.
+      const double reach =
+          std::max(std::max(corner.in, corner.out), delta_ * std::fabs(cross) / (len1 * len2)) + 1;
+      corner.ok = reach <= edgeIn && reach <= corner.edgeOut;
+    }
+    // Pass 2: two trimmed corners at the ends of one edge share it.
+    for (std::size_t t = 0; t < detours_.size(); ++t) {
+      const std::size_t next = t + 1 == detours_.size() ? 0 : t + 1;
+      const std::size_t after = detours_[t] + 3;
+      if (next == t || (after >= m ? after - m : after) != detours_[next]) continue;
+      Trim& here = trims_[t];
+      Trim& there = trims_[next];
+      if (here.ok && there.ok && here.out + there.in + 2 > here.edgeOut) here.ok = there.ok = false;
+    }
+    // Pass 3: the loop, each trimmed detour replaced by its crossing.
+    trimmed_.resize(m);
+    IntPoint* out = trimmed_.data();
+    std::size_t from = 0;
+    for (std::size_t t = 0; t < detours_.size(); ++t) {
+      const Trim& corner = trims_[t];
+      if (!corner.ok) continue;
+      const std::size_t i = detours_[t];
+      out = std::copy(dest_.begin() + static_cast<std::ptrdiff_t>(from),
+                      dest_.begin() + static_cast<std::ptrdiff_t>(i), out);
+      *out++ = IntPoint(round(corner.x), round(corner.y));
+      from = i + 3;
+    }
+    out = std::copy(dest_.begin() + static_cast<std::ptrdiff_t>(from), dest_.end(), out);
+    trimmed_.resize(static_cast<std::size_t>(out - trimmed_.data()));
+  }
+
+  double delta_ = 0, miterBound_ = 0.5;
+  std::vector<IntPoint> points_;
+  std::vector<uint32_t> starts_{0};
   std::vector<Normal> normals_;
+  Path dest_, trimmed_;
+  std::vector<uint32_t> detours_;  // where each concave corner's three points start in dest_
+  std::vector<uint32_t> corners_;  // and the source vertex of each
+  std::vector<Trim> trims_;
   bool hasLowest_ = false;
   IntPoint lowestPoint_;
   std::size_t lowestPath_ = 0;
 };
+
+// What one thread reuses from layer to layer.
+struct RawScratch {
+  std::vector<IntPoint> units;
+  std::vector<IntPoint> cleaned;
+  LoopCleaner cleaner;
+  RawOffset offset;
+
+  // CleanPolygon, then ClipperOffset::AddPath.
+  void add(std::span<const IntPoint> loop) {
+    cleaned.clear();
+    cleaner.clean(loop, kCleanMm * kOffsetUnitsPerMm, cleaned);
+    offset.add(cleaned);
+  }
+};
+
+RawScratch& rawScratch() {
+  thread_local RawScratch scratch;
+  return scratch;
+}
+
+Paths unite(const Paths& loops) {
+  Paths united;
+  ClipperLib::Clipper clipper;
+  clipper.AddPaths(loops, ClipperLib::ptSubject, true);
+  clipper.Execute(ClipperLib::ctUnion, united, ClipperLib::pftPositive, ClipperLib::pftPositive);
+  return united;
+}
+
+// The region grown by `mm` > 0: the positive-winding union of its trimmed raw offset loops.
+Paths grow(const Paths& region, double mm) {
+  RawScratch& scratch = rawScratch();
+  scratch.offset.reset(static_cast<double>(toUnits(mm)), kMiterLimit);
+  for (const Path& path : region) scratch.add(path);
+  Paths loops;
+  scratch.offset.build([&](const Path& loop) { loops.push_back(loop); });
+  return unite(loops);
+}
 
 void writeLoops(const Paths& paths, double z, LayerContours& out) {
   out.clear(z);
@@ -223,14 +482,29 @@ bool growsOnly(std::span<const ContourSet> sets, const LayerCorrection& correcti
 bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                        LayerContours& out) {
   if (!growsOnly(sets, correction)) return false;
-  const Paths region = solidRegion(sets, true);
-  Paths cleaned;
-  ClipperLib::CleanPolygons(region, cleaned, kCleanMm * kOffsetUnitsPerMm);
-  RawOffset raw(static_cast<double>(toUnits(correction.absolute)), kMiterLimit);
-  for (const Path& p : cleaned) raw.add(p);
-  Paths loops;
-  raw.build(loops);
-  writeLoops(loops, z, out);
+  // grow(solidRegion(sets, true), absolute) before its union, without the Paths: the same loops.
+  RawScratch& scratch = rawScratch();
+  scratch.offset.reset(static_cast<double>(toUnits(correction.absolute)), kMiterLimit);
+  const LayerContours& layer = *sets[0].layer;
+  for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+    if (layer.loopClosed[l] == 0) continue;
+    const std::span<const Point2d> loop = layer.loopPoints(l);
+    if (loop.size() < 3 || !finiteLoop(loop)) continue;
+    scratch.units.resize(loop.size());
+    for (std::size_t i = 0; i < loop.size(); ++i)
+      scratch.units[i] = IntPoint(roundToUnits(loop[i].x), roundToUnits(loop[i].y));
+    scratch.add(scratch.units);
+  }
+  out.clear(z);
+  constexpr double kMm = 1.0 / kOffsetUnitsPerMm;
+  scratch.offset.build([&](const Path& loop) {
+    const std::size_t first = out.points.size();
+    out.points.resize(first + loop.size());
+    out.facets.resize(first + loop.size(), kCorrectedFacet);
+    for (std::size_t i = 0; i < loop.size(); ++i)
+      out.points[first + i] = {static_cast<double>(loop[i].X) * kMm, static_cast<double>(loop[i].Y) * kMm};
+    out.endLoop(true);
+  });
   return true;
 }
 
@@ -241,11 +515,7 @@ std::size_t unitePositive(const LayerContours& loops, double z, LayerContours& o
     for (const Point2d& p : loops.loopPoints(l)) path.push_back(IntPoint(toUnits(p.x), toUnits(p.y)));
     input.push_back(std::move(path));
   }
-  Paths united;
-  ClipperLib::Clipper clipper;
-  clipper.AddPaths(input, ClipperLib::ptSubject, true);
-  clipper.Execute(ClipperLib::ctUnion, united, ClipperLib::pftPositive, ClipperLib::pftPositive);
-  writeLoops(united, z, out);
+  writeLoops(unite(input), z, out);
   return out.loopCount();
 }
 

@@ -5,13 +5,18 @@
 #include <cmath>
 #include <fstream>
 #include <numbers>
+#include <polyclipping/clipper.hpp>
+#include <random>
 #include <sstream>
 
 #include "core/mesh/mesh_info.h"
 #include "core/print/corrections.h"
 #include "core/raster/rasterize.h"
+#include "core/slicing/planes.h"
+#include "io/readers/stl_reader.h"
 #include "io/readers/stl_writer.h"
 #include "offset/polygon_offset.h"
+#include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/tool_runner.h"
 
@@ -141,10 +146,213 @@ std::vector<LayerContours> rawOffsetShapes() {
   addRect(shapes[8], 0, 0, 8, 8);  // a frame: an outer loop and a clockwise hole
   addLoop(shapes[8], {{2, 2}, {2, 6}, {6, 6}, {6, 2}});
   addLoop(shapes[9], {{0, 0}, {4, 0}, {0, 4}});  // 45 degree corners: mitred within limit 3, not 2
+  // A comb: notches 0.04 wide and deep between teeth, so that at the larger distances the concave
+  // corners' trims no longer fit their short edges and their detours stay.
+  std::vector<Point2d> comb{{0, 0}, {3, 0}, {3, 1}};
+  for (int i = 0; i < 20; ++i) {
+    const double x = 3 - 0.08 * i;
+    comb.insert(comb.end(), {{x - 0.04, 1}, {x - 0.04, 0.96}, {x - 0.08, 0.96}, {x - 0.08, 1}});
+  }
+  comb.push_back({0, 1});
+  addLoop(shapes.emplace_back(), comb);
   return shapes;
 }
 
-TEST(PolygonOffset, RawLoopsUniteToTheOffsetPointForPoint) {
+// The reference for growing: ClipperOffset itself (Clipper 6, Debian's libpolyclipping), on the outline
+// cleaned as correctLayer cleans it, with mitred joins and a miter limit of 3.
+ClipperLib::Paths toPaths(const LayerContours& layer) {
+  ClipperLib::Paths paths;
+  for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+    ClipperLib::Path& path = paths.emplace_back();
+    for (const Point2d& p : layer.loopPoints(l))
+      path.push_back(
+          ClipperLib::IntPoint(std::llround(p.x * kOffsetUnitsPerMm), std::llround(p.y * kOffsetUnitsPerMm)));
+  }
+  return paths;
+}
+
+LayerContours toLayer(const ClipperLib::Paths& paths) {
+  LayerContours layer;
+  for (const ClipperLib::Path& path : paths) {
+    for (const ClipperLib::IntPoint& p : path)
+      layer.addPoint(
+          {static_cast<double>(p.X) / kOffsetUnitsPerMm, static_cast<double>(p.Y) / kOffsetUnitsPerMm}, 0);
+    layer.endLoop(true);
+  }
+  return layer;
+}
+
+LayerContours clipperGrown(const LayerContours& layer, double d) {
+  ClipperLib::Paths cleaned, out;
+  ClipperLib::CleanPolygons(toPaths(layer), cleaned, 0.0005 * kOffsetUnitsPerMm);
+  ClipperLib::ClipperOffset offsetter(3.0);
+  offsetter.AddPaths(cleaned, ClipperLib::jtMiter, ClipperLib::etClosedPolygon);
+  offsetter.Execute(out, static_cast<double>(std::llround(d * kOffsetUnitsPerMm)));
+  return toLayer(out);
+}
+
+// The area, in mm^2, of the points in one of the two regions and not in the other.
+double differenceArea(const LayerContours& a, const LayerContours& b) {
+  ClipperLib::Clipper clipper;
+  clipper.AddPaths(toPaths(a), ClipperLib::ptSubject, true);
+  clipper.AddPaths(toPaths(b), ClipperLib::ptClip, true);
+  ClipperLib::Paths out;
+  clipper.Execute(ClipperLib::ctXor, out, ClipperLib::pftPositive, ClipperLib::pftPositive);
+  double area = 0;
+  for (const ClipperLib::Path& p : out) area += std::fabs(ClipperLib::Area(p));
+  return area / (kOffsetUnitsPerMm * kOffsetUnitsPerMm);
+}
+
+double perimeter(const LayerContours& layer) {
+  double length = 0;
+  for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+    const std::span<const Point2d> loop = layer.loopPoints(l);
+    for (std::size_t i = 0, j = loop.size() - 1; i < loop.size(); j = i++)
+      length += std::hypot(loop[i].x - loop[j].x, loop[i].y - loop[j].y);
+  }
+  return length;
+}
+
+// Growing by trimmed raw loops gives ClipperOffset's region: the two differ by no more than a band of
+// a nanometre or two along the outline (each rounds its crossing points to whole nanometres). The one
+// exception is a loop whose count goes negative somewhere: the bow tie's left triangle counts +1 and
+// its right one -1, so its region is the left triangle. Grown by trimmed loops, that is what grows;
+// ClipperOffset's detours add to the count over the negative triangle and it grows too large (by 0.43
+// mm^2 of 2.97 at d = 0.3). The reference there is the left triangle grown alone, for distances at
+// which the right triangle's corners are trimmed too (it then shrinks exactly, and no point within d of
+// the left triangle lies in what is left of it). At 1.5 the right triangle vanishes (its inradius is
+// 0.41), its detours stay, and nothing is promised for a negative count.
+TEST(PolygonOffset, GrowingGivesClipperOffsetsRegion) {
+  const std::vector<LayerContours> shapes = rawOffsetShapes();
+  LayerContours leftOfBowTie;
+  addLoop(leftOfBowTie, {{0, 0}, {1, 1}, {0, 2}});
+  for (std::size_t s = 0; s < shapes.size(); ++s) {
+    for (const double d : {0.0005, 0.05, 0.3, 1.5}) {
+      if (s == 6 && d > 1) continue;
+      const ContourSet set{&shapes[s], 1};
+      LayerContours grown;
+      correctLayer({&set, 1}, {d, 0, 0}, 0.0, grown);
+      const LayerContours reference = clipperGrown(s == 6 ? leftOfBowTie : shapes[s], d);
+      EXPECT_NEAR(layerSignedArea(grown), layerSignedArea(reference), 2e-6 * perimeter(reference));
+      EXPECT_LE(differenceArea(grown, reference), 2e-6 * perimeter(reference))
+          << "shape " << s << ", d " << d;
+    }
+  }
+}
+
+// Real layers: the aligner (dense, nearly straight outlines with many concave corners, overlapping
+// shells) and the femur, 40 layers each. The grown region is ClipperOffset's within a nanometre band,
+// and binary masks of the raw loops (what a masks-only job rasterizes) are those of Clipper's polygons.
+TEST(PolygonOffset, GrowingRealLayersGivesClipperOffsetsRegionAndMasks) {
+  RasterScratch scratch;
+  std::size_t pixelsCompared = 0, pixelsDiffering = 0, layersCompared = 0;
+  for (const char* file : {"derived/aligner_upper_case0.stl.gz", "knee_femur_ssm_S001.stl"}) {
+    const FacetSoup soup = readStl(fixtures::modelPath(file));
+    const BoundingBox box = boundsOf(soup.corners);
+    PlaneSpec spec;
+    spec.layers = 40;
+    std::string error;
+    const std::vector<double> planes = makePlanes(spec, box.min.z, box.max.z, error);
+    ASSERT_TRUE(error.empty()) << error;
+    const std::vector<LayerContours> layers = fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse);
+    PixelGrid grid;
+    grid.pixel = 0.04725;
+    grid.x0 = box.min.x - 1.013;
+    grid.y0 = box.min.y - 1.007;
+    grid.width = static_cast<uint32_t>((box.max.x - box.min.x + 2) / grid.pixel);
+    grid.height = static_cast<uint32_t>((box.max.y - box.min.y + 2) / grid.pixel);
+    for (const double d : {0.05, 0.2}) {
+      for (std::size_t k = 0; k < layers.size(); ++k) {
+        if (layers[k].loopCount() == 0) continue;
+        const ContourSet set{&layers[k], 1};
+        LayerContours grown, raw;
+        correctLayer({&set, 1}, {d, 0, 0}, 0.0, grown);
+        ASSERT_TRUE(rawCorrectedLoops({&set, 1}, {d, 0, 0}, 0.0, raw));
+        const LayerContours reference = clipperGrown(layers[k], d);
+        EXPECT_LE(differenceArea(grown, reference), 2e-6 * perimeter(reference))
+            << file << " layer " << k << ", d " << d;
+        const ContourSet a{&reference, 1}, b{&raw, 1};
+        MaskImage ma, mb;
+        rasterizeBinary({&a, 1}, grid, ma, scratch);
+        rasterizeBinary({&b, 1}, grid, mb, scratch);
+        for (std::size_t p = 0; p < ma.pixels.size(); ++p)
+          pixelsDiffering += ma.pixels[p] != mb.pixels[p] ? 1 : 0;
+        pixelsCompared += ma.pixels.size();
+        ++layersCompared;
+      }
+    }
+  }
+  EXPECT_GT(layersCompared, 120u);
+  // A pixel centre within a nanometre of the outline may fall either way: at most one in ten million.
+  EXPECT_LE(pixelsDiffering * 10'000'000, pixelsCompared) << pixelsDiffering << " of " << pixelsCompared;
+}
+
+// Random outlines, 4,000 of them: stars of 5 to 84 points at random radii, half with a jitter point
+// beside every vertex (short edges, sharp concave corners, spikes, small self-crossings), grown by
+// 0.005 to 0.6. Wherever the count never goes negative, the region is ClipperOffset's. (With a
+// negative count somewhere, ClipperOffset itself is not the grown positive region: see the bow tie.)
+TEST(PolygonOffset, GrowingRandomOutlinesGivesClipperOffsetsRegion) {
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> uniform(0, 1);
+  std::size_t compared = 0;
+  for (int trial = 0; trial < 4000; ++trial) {
+    std::vector<Point2d> points;
+    const int n = 5 + trial % 80;
+    for (int i = 0; i < n; ++i) {
+      const double a = 2 * std::numbers::pi * (i + 0.8 * uniform(rng)) / n;
+      const double r = (trial % 3 == 0 ? 0.05 : 0.5) + uniform(rng);
+      points.push_back({r * std::cos(a), r * std::sin(a)});
+      if (trial % 2) {
+        const double e = 0.02 * uniform(rng), b = 2 * std::numbers::pi * uniform(rng);
+        points.push_back({r * std::cos(a) + e * std::cos(b), r * std::sin(a) + e * std::sin(b)});
+      }
+    }
+    LayerContours shape;
+    addLoop(shape, points);
+    const double d = 0.005 + (trial % 4 == 0 ? 0.6 : 0.1) * uniform(rng);
+    ClipperLib::Paths negative;
+    ClipperLib::Clipper clipper;
+    clipper.AddPaths(toPaths(shape), ClipperLib::ptSubject, true);
+    clipper.Execute(ClipperLib::ctUnion, negative, ClipperLib::pftNegative, ClipperLib::pftNegative);
+    if (!negative.empty()) continue;
+    const ContourSet set{&shape, 1};
+    LayerContours grown;
+    correctLayer({&set, 1}, {d, 0, 0}, 0.0, grown);
+    const LayerContours reference = clipperGrown(shape, d);
+    ASSERT_LE(differenceArea(grown, reference), 2e-6 * perimeter(reference))
+        << "trial " << trial << ", d " << d;
+    ++compared;
+  }
+  EXPECT_GT(compared, 2000u);
+}
+
+// Concave corners are trimmed where their trims fit: an L grown by 0.1 is the grown L, six points, not
+// a loop with a detour through its inner corner. Where the trims do not fit (the comb's notches at
+// 0.3), the detour stays.
+TEST(PolygonOffset, ConcaveCornersAreTrimmedWhereTheTrimsFit) {
+  LayerContours shape;
+  addLoop(shape, {{0, 0}, {4, 0}, {4, 1}, {1, 1}, {1, 4}, {0, 4}});
+  const ContourSet set{&shape, 1};
+  LayerContours raw;
+  ASSERT_TRUE(rawCorrectedLoops({&set, 1}, {0.1, 0, 0}, 0.0, raw));
+  const std::vector<Point2d> expected{{-0.1, -0.1}, {4.1, -0.1}, {4.1, 1.1},
+                                      {1.1, 1.1},   {1.1, 4.1},  {-0.1, 4.1}};
+  ASSERT_EQ(raw.points.size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i) {
+    EXPECT_NEAR(raw.points[i].x, expected[i].x, 1e-9) << i;
+    EXPECT_NEAR(raw.points[i].y, expected[i].y, 1e-9) << i;
+  }
+  const LayerContours comb = rawOffsetShapes().back();
+  const ContourSet combSet{&comb, 1};
+  ASSERT_TRUE(rawCorrectedLoops({&combSet, 1}, {0.01, 0, 0}, 0.0, raw));
+  EXPECT_EQ(raw.points.size(), comb.points.size()) << "every corner trimmed";
+  ASSERT_TRUE(rawCorrectedLoops({&combSet, 1}, {0.3, 0, 0}, 0.0, raw));
+  EXPECT_GT(raw.points.size(), comb.points.size() + 20) << "the notches' detours stay";
+}
+
+// The masks' raw loops (built straight from the layer's points) united are correctLayer's polygons
+// (built through its Paths), point for point: masks-only and contour jobs see one region.
+TEST(PolygonOffset, RawLoopsUniteToTheCorrectedLayerPointForPoint) {
   std::vector<LayerContours> shapes = rawOffsetShapes();
   // An arc of radius 2 m in 2 mm steps: turns of 1 mrad, which outline cleaning keeps (the middle point
   // is 1 um off its neighbours' line) and a 0.5 um offset takes as straight on.

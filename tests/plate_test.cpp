@@ -221,6 +221,14 @@ TEST_F(PlateTest, CorrectionsApplyToEachPartAsWhenSlicedAlone) {
                            choice);
 }
 
+// A growing absolute correction on binary masks: the plate and the parts alone rasterize each part's
+// raw offset loops (no union), moved or not; the masks still match pixel for pixel.
+TEST_F(PlateTest, GrowingCorrectionOnBinaryMasksAsWhenSlicedAlone) {
+  ProfileChoice choice;
+  choice.overrides = {{"absolute_correction", "0.05"}};
+  expectPartsAsSlicedAlone(R"("print_settings": {"absolute_correction": 0.05},)", choice);
+}
+
 ArrangeSettings plate8k() {
   ArrangeSettings s;
   s.plateWidth = 7680 * 0.043;

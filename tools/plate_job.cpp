@@ -276,11 +276,16 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     std::vector<LayerResult> layers;
     Picture picture;
     LayerContours corrected;  // a part's corrected region where the part was sliced, before it is moved
+    LayerContours raw;        // a part's raw offset loops where it was sliced (a growing correction)
+    std::vector<LayerContours> maskLoops;  // per part: its raw offset loops moved, when its masks use them
+    std::vector<uint8_t> rawMasks;         // per part: 1 when its masks rasterize maskLoops
   };
   std::vector<SlotState> slots(plan.slots);
   for (SlotState& s : slots) {
     s.layers.resize(plan.bandLayers);
     for (LayerResult& r : s.layers) r.moved.resize(meshes.size()), r.partArea.resize(partCount);
+    s.maskLoops.resize(partCount);
+    s.rawMasks.assign(partCount, 0);
     if (!job.picture.empty()) s.picture.reset(geometry.width, geometry.height);
   }
   std::vector<double> partVolume(partCount, 0.0);
@@ -302,6 +307,11 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
         correctLayer(s.sets, correction, layer[first].z, s.corrected);
         const PlatePartResult& part = results[members[m]];
         translateLayer(s.corrected, part.tx, part.ty, r.moved[first]);
+        // A growing correction and binary masks: the part's masks rasterize its raw offset loops, as
+        // the part sliced alone does.
+        s.rawMasks[m] =
+            masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, layer[first].z, s.raw);
+        if (s.rawMasks[m]) translateLayer(s.raw, part.tx, part.ty, s.maskLoops[m]);
         for (std::size_t i = first + 1; i < end; ++i) r.moved[i].clear(layer[i].z);
       }
     } else {
@@ -319,6 +329,16 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     if (!masks) {
       for (const double a : r.partArea) r.area += a;
       return;
+    }
+    if (correcting) {
+      s.sets.clear();
+      for (std::size_t i = 0; i < layer.size(); ++i) {
+        const std::size_t m = owner[i];
+        if (!s.rawMasks[m])
+          s.sets.push_back({&r.moved[i], signs[i]});
+        else if (i == partStart[m])
+          s.sets.push_back({&s.maskLoops[m], 1});
+      }
     }
     r.area = rasterizeLayerSets(s.sets, maskJob, s.mask, s.raster, &transfer);
     if (!job.picture.empty() && (k % pictureEvery == 0 || k + 1 == planes.size()))

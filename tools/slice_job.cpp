@@ -709,9 +709,10 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
         s.sets.push_back({&sliced[i], i == 0 || i <= addCount ? 1 : -1});
       // A correction that only grows, binary masks: the masks rasterize the raw offset loops, whose
       // positive-winding region is the corrected one (polygon_offset.h), and the polygons, when contour
-      // outputs or the report need them, are those loops united (correctLayer's result, exactly). (The
-      // exact-coverage rasterizer cuts a row at every crossing, and raw loops cross at every concave
-      // vertex: anti-aliased masks are faster from the polygons.)
+      // outputs or the report need them, are those loops united (correctLayer's result, exactly).
+      // (Anti-aliased masks rasterize the polygons: where a corner's detour stays, its crossing edges
+      // make coverage values depend on rounding at the last bit, so a part moved onto a plate could
+      // differ by a level from the part alone.)
       r.raw = masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, sliced[0].z, r.rawLoops);
       if (!r.raw)
         correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
