@@ -20,6 +20,10 @@ void encodeRgbPng(const RgbImage& image, std::vector<uint8_t>& out) {
   ihdr.bit_depth = 8;
   ihdr.color_type = SPNG_COLOR_TYPE_TRUECOLOR;
   int rc = spng_set_option(ctx.get(), SPNG_ENCODE_TO_BUFFER, 1);
+  // The sub filter alone at zlib level 1: the SL1 thumbnails of the aligner in 7 ms instead of 31 ms
+  // (every filter tried at level 6, libspng's default), for 10 % more bytes (124 kB against 113 kB).
+  if (rc == 0) rc = spng_set_option(ctx.get(), SPNG_FILTER_CHOICE, SPNG_FILTER_CHOICE_SUB);
+  if (rc == 0) rc = spng_set_option(ctx.get(), SPNG_IMG_COMPRESSION_LEVEL, 1);
   if (rc == 0) rc = spng_set_ihdr(ctx.get(), &ihdr);
   if (rc == 0)
     rc = spng_encode_image(ctx.get(), image.rgb.data(), image.rgb.size(), SPNG_FMT_PNG, SPNG_ENCODE_FINALIZE);

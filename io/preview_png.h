@@ -1,5 +1,6 @@
-// Preview pictures (core/raster/preview.h) as PNG files: 8-bit RGB, encoded by libspng with its default zlib
-// settings, no time or text chunks, so the same picture gives the same bytes.
+// Preview pictures (core/raster/preview.h) as PNG files: 8-bit RGB, encoded by libspng (sub filter, zlib
+// level 1: these are small pictures drawn before a job's first layer), no time or text chunks, so the
+// same picture gives the same bytes.
 #pragma once
 
 #include <cstdint>
