@@ -156,6 +156,26 @@ TEST(Preview, PiecesGiveTheSerialPicture) {
   EXPECT_GT(modelExtent(serial).count, 800u * 480 / 10);
 }
 
+TEST(Preview, SeveralSizesInOnePassAreEachSizeDrawnAlone) {
+  // Printer files draw two sizes in one pass over the facets: each picture is the one drawn alone, on
+  // one thread or on the pool, including a size whose samples the small facets miss.
+  FacetSoup soup = fixtures::sphere(10, 256, 128);
+  const FacetSoup second = fixtures::sphere(7, 256, 128);
+  for (Point3f c : second.corners) soup.corners.push_back({c.x + 9.0f, c.y - 4.0f, c.z + 3.0f});
+  const PreviewSize sizes[3] = {{400, 400}, {800, 480}, {24, 16}};
+  RgbImage alone[3], together[3], pooled[3];
+  for (int i = 0; i < 3; ++i) renderPreview(soup.corners, sizes[i].width, sizes[i].height, alone[i]);
+  renderPreviews(soup.corners, sizes, together);
+  renderPreviews(soup.corners, sizes, pooled, parallelChunkRunner());
+  for (int i = 0; i < 3; ++i) {
+    EXPECT_EQ(together[i].width, sizes[i].width);
+    EXPECT_EQ(together[i].height, sizes[i].height);
+    EXPECT_EQ(together[i].rgb, alone[i].rgb) << i;
+    EXPECT_EQ(pooled[i].rgb, alone[i].rgb) << i;
+    EXPECT_GT(modelExtent(alone[i]).count, sizes[i].width * sizes[i].height / 10) << i;
+  }
+}
+
 TEST(Preview, EmptyMeshIsBackgroundAndPngDecodesToThePixels) {
   RgbImage im;
   renderPreview({}, 16, 8, im);

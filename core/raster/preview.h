@@ -40,4 +40,14 @@ Point3f previewLightDirection();
 void renderPreview(std::span<const Point3f> corners, uint32_t width, uint32_t height, RgbImage& out,
                    const ChunkRunner& runner = serialChunkRunner());
 
+struct PreviewSize {
+  uint32_t width = 0, height = 0;
+};
+
+// The same picture at several sizes (outs[i] at sizes[i], each exactly what renderPreview draws at that
+// size) in one pass over the facets: each facet is projected and shaded once for all of them. Printer
+// files carry two sizes.
+void renderPreviews(std::span<const Point3f> corners, std::span<const PreviewSize> sizes,
+                    std::span<RgbImage> outs, const ChunkRunner& runner = serialChunkRunner());
+
 }  // namespace toposlice

@@ -184,12 +184,12 @@ class GooSink final : public EncodingMaskSink {
     job_.previewModel = {};
     if (job.grid.width > 0xFFFF || job.grid.height > 0xFFFF)
       throw OutputError(path.string() + ": a GOO file holds at most 65535 x 65535 pixels");
-    RgbImage image;
+    const PreviewSize sizes[2] = {{kGooSmallPreview, kGooSmallPreview}, {kGooBigPreview, kGooBigPreview}};
+    RgbImage pictures[2];
+    renderPreviews(job.previewModel, sizes, pictures, job.previewRunner);
     BigEndian out(previews_);
-    renderPreview(job.previewModel, kGooSmallPreview, kGooSmallPreview, image, job.previewRunner);
-    appendRgb565(out, image);
-    renderPreview(job.previewModel, kGooBigPreview, kGooBigPreview, image, job.previewRunner);
-    appendRgb565(out, image);
+    appendRgb565(out, pictures[0]);
+    appendRgb565(out, pictures[1]);
     const std::vector<uint8_t> header = gooHeader(job_, 0, previews_);
     file_.write(header.data(), header.size());
   }

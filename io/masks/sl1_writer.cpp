@@ -76,9 +76,15 @@ class Sl1Sink final : public EncodingMaskSink {
                         " layers (5-digit layer names); this job has " + std::to_string(job.layerCount));
     }
     job_.previewModel = {};
-    if (!job.previewModel.empty()) {  // PrusaSlicer's two thumbnails, as it names them
-      zip_.add("thumbnail/thumbnail400x400.png", previewPng(job.previewModel, 400, 400, job.previewRunner));
-      zip_.add("thumbnail/thumbnail800x480.png", previewPng(job.previewModel, 800, 480, job.previewRunner));
+    if (!job.previewModel.empty()) {  // PrusaSlicer's two thumbnails, as it names them, drawn together
+      const PreviewSize sizes[2] = {{400, 400}, {800, 480}};
+      RgbImage pictures[2];
+      renderPreviews(job.previewModel, sizes, pictures, job.previewRunner);
+      std::vector<uint8_t> png;
+      encodeRgbPng(pictures[0], png);
+      zip_.add("thumbnail/thumbnail400x400.png", png);
+      encodeRgbPng(pictures[1], png);
+      zip_.add("thumbnail/thumbnail800x480.png", png);
     }
   }
 
