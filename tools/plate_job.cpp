@@ -304,13 +304,16 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
         const std::size_t first = partStart[m], end = m + 1 < partCount ? partStart[m + 1] : layer.size();
         s.sets.clear();
         for (std::size_t i = first; i < end; ++i) s.sets.push_back({&layer[i], signs[i]});
-        correctLayer(s.sets, correction, layer[first].z, s.corrected);
-        const PlatePartResult& part = results[members[m]];
-        translateLayer(s.corrected, part.tx, part.ty, r.moved[first]);
         // A growing correction and binary masks: the part's masks rasterize its raw offset loops, as
-        // the part sliced alone does.
+        // the part sliced alone does, and its polygons are those loops united (correctLayer's result).
         s.rawMasks[m] =
             masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, layer[first].z, s.raw);
+        if (s.rawMasks[m])
+          unitePositive(s.raw, layer[first].z, s.corrected);
+        else
+          correctLayer(s.sets, correction, layer[first].z, s.corrected);
+        const PlatePartResult& part = results[members[m]];
+        translateLayer(s.corrected, part.tx, part.ty, r.moved[first]);
         if (s.rawMasks[m]) translateLayer(s.raw, part.tx, part.ty, s.maskLoops[m]);
         for (std::size_t i = first + 1; i < end; ++i) r.moved[i].clear(layer[i].z);
       }
