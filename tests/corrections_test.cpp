@@ -255,12 +255,7 @@ TEST(PolygonOffset, GrowingRealLayersGivesClipperOffsetsRegionAndMasks) {
     const std::vector<double> planes = makePlanes(spec, box.min.z, box.max.z, error);
     ASSERT_TRUE(error.empty()) << error;
     const std::vector<LayerContours> layers = fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse);
-    PixelGrid grid;
-    grid.pixel = 0.04725;
-    grid.x0 = box.min.x - 1.013;
-    grid.y0 = box.min.y - 1.007;
-    grid.width = static_cast<uint32_t>((box.max.x - box.min.x + 2) / grid.pixel);
-    grid.height = static_cast<uint32_t>((box.max.y - box.min.y + 2) / grid.pixel);
+    const PixelGrid grid = fixtures::gridAround(box, 0.04725, 1, 0.013, 0.007);
     for (const double d : {0.05, 0.2}) {
       for (std::size_t k = 0; k < layers.size(); ++k) {
         if (layers[k].loopCount() == 0) continue;

@@ -122,12 +122,7 @@ TEST(DefectRepair, MasksWithOnePercentOfFacetsDeletedAgreeWithIntactModel) {
   EXPECT_GT(holedStats.gaps.selfClosed, 0u);
 
   const BoundingBox box = boundsOf(intact.corners);
-  PixelGrid grid;
-  grid.pixel = 0.25;
-  grid.x0 = box.min.x - 1;
-  grid.y0 = box.min.y - 1;
-  grid.width = static_cast<uint32_t>((box.max.x - box.min.x + 2) / grid.pixel);
-  grid.height = static_cast<uint32_t>((box.max.y - box.min.y + 2) / grid.pixel);
+  const PixelGrid grid = fixtures::gridAround(box, 0.25, 1);
   RasterScratch scratch;
   MaskImage ma, mb;
   uint64_t lit = 0, differing = 0;
