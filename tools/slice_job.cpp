@@ -710,9 +710,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       // A correction that only grows, binary masks: the masks rasterize the raw offset loops, whose
       // positive-winding region is the corrected one (polygon_offset.h), and the polygons, when contour
       // outputs or the report need them, are those loops united (correctLayer's result, exactly).
-      // (Anti-aliased masks rasterize the polygons: where a corner's detour stays, its crossing edges
-      // make coverage values depend on rounding at the last bit, so a part moved onto a plate could
-      // differ by a level from the part alone.)
+      // (Anti-aliased masks rasterize the polygons: where a corner's detour stays, the coverage
+      // rasterizer cuts the row at its crossing, and the row's sums then round differently with other
+      // parts in the row, so a part on a plate could differ by a level from the part alone.)
       r.raw = masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, sliced[0].z, r.rawLoops);
       if (!r.raw)
         correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
