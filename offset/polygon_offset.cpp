@@ -462,15 +462,21 @@ Paths grow(const Paths& region, double mm) {
   return unite(loops);
 }
 
+// One closed loop of integer units appended to `out` in mm.
+void appendLoop(const Path& loop, LayerContours& out) {
+  constexpr double kMm = 1.0 / kOffsetUnitsPerMm;
+  const std::size_t first = out.points.size();
+  out.points.resize(first + loop.size());
+  out.facets.resize(first + loop.size(), kCorrectedFacet);
+  for (std::size_t i = 0; i < loop.size(); ++i)
+    out.points[first + i] = {static_cast<double>(loop[i].X) * kMm, static_cast<double>(loop[i].Y) * kMm};
+  out.endLoop(true);
+}
+
 void writeLoops(const Paths& paths, double z, LayerContours& out) {
   out.clear(z);
-  constexpr double kMm = 1.0 / kOffsetUnitsPerMm;
-  for (const Path& path : paths) {
-    if (path.size() < 3) continue;
-    for (const IntPoint& p : path)
-      out.addPoint({static_cast<double>(p.X) * kMm, static_cast<double>(p.Y) * kMm}, kCorrectedFacet);
-    out.endLoop(true);
-  }
+  for (const Path& path : paths)
+    if (path.size() >= 3) appendLoop(path, out);
 }
 
 bool growsOnly(std::span<const ContourSet> sets, const LayerCorrection& correction) {
@@ -496,15 +502,7 @@ bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& 
     scratch.add(scratch.units);
   }
   out.clear(z);
-  constexpr double kMm = 1.0 / kOffsetUnitsPerMm;
-  scratch.offset.build([&](const Path& loop) {
-    const std::size_t first = out.points.size();
-    out.points.resize(first + loop.size());
-    out.facets.resize(first + loop.size(), kCorrectedFacet);
-    for (std::size_t i = 0; i < loop.size(); ++i)
-      out.points[first + i] = {static_cast<double>(loop[i].X) * kMm, static_cast<double>(loop[i].Y) * kMm};
-    out.endLoop(true);
-  });
+  scratch.offset.build([&](const Path& loop) { appendLoop(loop, out); });
   return true;
 }
 

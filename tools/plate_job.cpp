@@ -107,6 +107,14 @@ bool scalesWhenTurned(const PrintSettings& print) {
   return print.scales() && !scalesWhenRead(print);
 }
 
+// The part's model and features scaled by the scaling correction about the centre of the model as it
+// lies now (as for that model sliced alone).
+void scalePart(LoadedPart& part, const PrintSettings& print) {
+  const std::array<double, 3> centre = scaleCentre(boundsOf(part.model.corners)), factors = print.scale();
+  scaleCorners(part.model.corners, factors, centre);
+  for (FacetSoup& f : part.features) scaleCorners(f.corners, factors, centre);
+}
+
 // The contours of a layer moved by (tx, ty), into `out` (its capacity reused).
 void translateLayer(const LayerContours& in, double tx, double ty, LayerContours& out) {
   out = in;
@@ -520,13 +528,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         part.model = readMesh(spec.model, read);
         for (const auto* list : {&spec.add, &spec.remove})
           for (const auto& path : *list) part.features.push_back(readMesh(path, read));
-        if (scalesWhenRead(print)) {
-          // About the model's centre, as for a part sliced alone.
-          const std::array<double, 3> centre = scaleCentre(boundsOf(part.model.corners)),
-                                      factors = print.scale();
-          scaleCorners(part.model.corners, factors, centre);
-          for (FacetSoup& f : part.features) scaleCorners(f.corners, factors, centre);
-        }
+        if (scalesWhenRead(print)) scalePart(part, print);
         // The footprint covers the model and its add-ons (a removal never widens it).
         FacetSoup all = part.model;
         for (std::size_t f = 0; f < spec.add.size(); ++f)
@@ -616,13 +618,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
     const ArrangedPart& a = arranged.parts[p];
     rotateSoup(loaded[p].model, a.rotation);
     for (FacetSoup& f : loaded[p].features) rotateSoup(f, a.rotation);
-    if (scalesWhenTurned(print)) {
-      // Along the plate's axes, about the centre of the turned model (as for that model sliced alone).
-      const std::array<double, 3> centre = scaleCentre(boundsOf(loaded[p].model.corners)),
-                                  factors = print.scale();
-      scaleCorners(loaded[p].model.corners, factors, centre);
-      for (FacetSoup& f : loaded[p].features) scaleCorners(f.corners, factors, centre);
-    }
+    if (scalesWhenTurned(print)) scalePart(loaded[p], print);  // along the plate's axes, once turned
     BoundingBox box = partBounds(loaded[p], job.parts[p].add.size());
     r.plate = a.plate;
     r.arranged = !job.parts[p].placement;

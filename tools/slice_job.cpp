@@ -668,14 +668,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   struct LayerResult {
     EncodedMaskLayer encoded;              // the mask as the sink encoded it (a PNG, an EXR file, mask runs)
     std::vector<LayerContours> corrected;  // with corrections: the corrected layer, then empty features
-    LayerContours rawLoops;                // with a growing correction: the masks' raw offset loops
-    bool raw = false;                      // the masks rasterize rawLoops
     std::vector<TextBuffer> contourBytes;  // per contour sink that encodes its layers (CLI)
     double area = 0;
     uint64_t islands = 0;
   };
   struct SlotState : MaskSlotScratch {
     std::vector<LayerResult> layers;
+    LayerContours rawLoops;  // with a growing correction: the layer's raw offset loops, for its masks
   };
   const BandPlan plan = planBands(planes.size(), options.slice);
   std::vector<SlotState> slots(plan.slots);
@@ -699,6 +698,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
     std::span<const LayerContours> layer = sliced;
+    bool raw = false;  // the masks rasterize s.rawLoops
     if (correcting) {
       // Absolute correction and elephant foot on the layer's solid region (model, add-ons and removals
       // under the positive rule): every output below and in consume sees the corrected layer.
@@ -713,11 +713,11 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       // (Anti-aliased masks rasterize the polygons: where a corner's detour stays, the coverage
       // rasterizer cuts the row at its crossing, and the row's sums then round differently with other
       // parts in the row, so a part on a plate could differ by a level from the part alone.)
-      r.raw = masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, sliced[0].z, r.rawLoops);
-      if (!r.raw)
+      raw = masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, sliced[0].z, s.rawLoops);
+      if (!raw)
         correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
       else if (polygonsNeeded)
-        unitePositive(r.rawLoops, sliced[0].z, r.corrected[0]);
+        unitePositive(s.rawLoops, sliced[0].z, r.corrected[0]);
       else
         r.corrected[0].clear(sliced[0].z);
       for (std::size_t i = 1; i < sliced.size(); ++i) r.corrected[i].clear(sliced[i].z);
@@ -739,8 +739,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       return;
     }
     s.sets.clear();
-    if (r.raw)
-      s.sets.push_back({&r.rawLoops, 1});
+    if (raw)
+      s.sets.push_back({&s.rawLoops, 1});
     else
       for (std::size_t i = 0; i < layer.size(); ++i)
         s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
