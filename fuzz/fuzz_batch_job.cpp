@@ -8,55 +8,23 @@
 //   height and pixel, layers and resolution >= 1, join tolerance >= 0, a known method, threads <= 4096;
 //   mirrorX and mirrorY set together.
 #include <algorithm>
-#include <array>
-#include <cctype>
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <filesystem>
-#include <set>
-#include <string>
 #include <string_view>
 
+#include "fuzz/job_checks.h"
 #include "io/errors.h"
 #include "io/jobs/batch_job.h"
 
+const char* const fuzzjob::kHarness = "fuzz_batch_job";
+
 namespace {
 
+using fuzzjob::hasExtension;
+using fuzzjob::PathCheck;
+using fuzzjob::require;
 namespace fs = std::filesystem;
-
-void require(bool condition, const char* what) {
-  if (condition) return;
-  std::fprintf(stderr, "fuzz_batch_job: invariant broken: %s\n", what);
-  std::abort();
-}
-
-template <std::size_t N>
-bool hasExtension(const fs::path& p, const std::array<std::string_view, N>& extensions) {
-  std::string ext = p.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  return std::find(extensions.begin(), extensions.end(), ext) != extensions.end();
-}
-
-class PathCheck {
- public:
-  void input(const fs::path& p) {
-    require(p.is_absolute(), "input paths are resolved against the base folder");
-    inputs_.insert(p.string());
-  }
-  void output(const fs::path& p) {
-    require(p.is_absolute(), "output paths are resolved against the base folder");
-    require(outputs_.insert(p.string()).second, "every output path is unique");
-  }
-  void finish() const {
-    for (const std::string& out : outputs_) require(!inputs_.contains(out), "no output is also an input");
-  }
-
- private:
-  std::set<std::string> inputs_, outputs_;
-};
 
 void checkJob(const toposlice::BatchJob& job) {
   PathCheck paths;
@@ -75,12 +43,7 @@ void checkJob(const toposlice::BatchJob& job) {
   if (job.layerHeight) require(*job.layerHeight > 0, "layer_height is positive");
   if (job.layers) require(*job.layers >= 1, "layers >= 1");
   if (job.joinTolerance) require(*job.joinTolerance >= 0, "join_tolerance is not negative");
-  require(job.method.empty() || job.method == "sr" || job.method == "sr-lazy" || job.method == "cp",
-          "the method is known");
-  if (job.pixel) require(*job.pixel > 0, "pixel is positive");
-  if (job.resolution) require((*job.resolution)[0] >= 1 && (*job.resolution)[1] >= 1, "resolution >= 1");
-  require(job.mirrorX.has_value() == job.mirrorY.has_value(), "mirrorX and mirrorY are set together");
-  require(job.threads <= 4096, "threads <= 4096");
+  fuzzjob::checkSliceSettings(job);
 
   require(!job.variants.empty(), "at least one variant");
   std::set<std::string> names;

@@ -9,57 +9,42 @@
 // - arrangement: spacing and margin finite and >= 0, rotation step in [0, 360), cell >= 0.05 mm;
 //   given placements finite;
 // - print_settings: each key once (each value was checked by the reader); a light map is an input.
-#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <filesystem>
 #include <set>
 #include <string>
 #include <string_view>
 
+#include "fuzz/job_checks.h"
 #include "io/errors.h"
 #include "io/jobs/plate_job_file.h"
+
+const char* const fuzzjob::kHarness = "fuzz_plate_job";
 
 namespace {
 
 namespace fs = std::filesystem;
+using fuzzjob::require;
 
-void require(bool condition, const char* what) {
-  if (condition) return;
-  std::fprintf(stderr, "fuzz_plate_job: invariant broken: %s\n", what);
-  std::abort();
-}
+constexpr std::array<std::string_view, 3> kContourExtensions = {".cli", ".svg", ".3mf"};
 
 void checkJob(const toposlice::PlateJob& job) {
-  std::set<std::string> inputs, outputs;
-  const auto input = [&](const fs::path& p) {
-    require(p.is_absolute(), "input paths are resolved against the base folder");
-    inputs.insert(p.string());
-  };
-  const auto output = [&](const fs::path& p) {
-    require(p.is_absolute(), "output paths are resolved against the base folder");
-    require(outputs.insert(p.string()).second, "every output path is unique");
-  };
+  fuzzjob::PathCheck paths;
   require(!job.printer.empty() || !job.profile.empty() || (job.pixel && job.resolution),
           "a printer, a profile, or pixel and resolution");
-  if (!job.profile.empty()) input(job.profile);
+  if (!job.profile.empty()) paths.input(job.profile);
   std::set<std::string> keys;
   for (const auto& [key, value] : job.printSettings) {
     require(!key.empty(), "print_settings keys are not empty");
     require(keys.insert(key).second, "each print_settings key once");
-    if (key == "light_map" && !value.empty()) input(value);  // resolved against the base folder
+    if (key == "light_map" && !value.empty()) paths.input(value);  // resolved against the base folder
   }
   require(job.layerHeight > 0, "layer_height is positive");
-  if (job.pixel) require(*job.pixel > 0, "pixel is positive");
-  if (job.resolution) require((*job.resolution)[0] >= 1 && (*job.resolution)[1] >= 1, "resolution >= 1");
   if (job.buildHeight) require(*job.buildHeight >= 0, "build_height is not negative");
-  require(job.method.empty() || job.method == "sr" || job.method == "sr-lazy" || job.method == "cp",
-          "the method is known");
-  require(job.mirrorX.has_value() == job.mirrorY.has_value(), "mirrorX and mirrorY are set together");
-  require(job.threads <= 4096, "threads <= 4096");
+  fuzzjob::checkSliceSettings(job);
   require(job.scale > 0, "scale is positive");
   require(std::isfinite(job.spacing) && job.spacing >= 0, "spacing is finite and >= 0");
   require(std::isfinite(job.margin) && job.margin >= 0, "margin is finite and >= 0");
@@ -72,10 +57,10 @@ void checkJob(const toposlice::PlateJob& job) {
     require(!p.name.empty(), "part names are not empty");
     require(names.insert(p.name).second, "part names are unique");
     require(!p.model.empty(), "every part has a model");
-    input(p.model);
-    if (!p.templateFile.empty()) input(p.templateFile);
-    for (const fs::path& f : p.add) input(f);
-    for (const fs::path& f : p.remove) input(f);
+    paths.input(p.model);
+    if (!p.templateFile.empty()) paths.input(p.templateFile);
+    for (const fs::path& f : p.add) paths.input(f);
+    for (const fs::path& f : p.remove) paths.input(f);
     if (p.placement)
       require(std::isfinite(p.placement->x) && std::isfinite(p.placement->y) &&
                   std::isfinite(p.placement->rotation),
@@ -85,15 +70,12 @@ void checkJob(const toposlice::PlateJob& job) {
   require(!job.masks.empty() || !job.contours.empty() || !job.report.empty(), "the job has an output");
   require(job.picture.empty() || !job.masks.empty(), "a picture only with masks");
   for (const fs::path* p : {&job.masks, &job.report, &job.picture})
-    if (!p->empty()) output(*p);
+    if (!p->empty()) paths.output(*p);
   for (const fs::path& c : job.contours) {
-    std::string ext = c.extension().string();
-    std::transform(ext.begin(), ext.end(), ext.begin(),
-                   [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
-    require(ext == ".cli" || ext == ".svg" || ext == ".3mf", "contour extension is known");
-    output(c);
+    require(fuzzjob::hasExtension(c, kContourExtensions), "contour extension is known");
+    paths.output(c);
   }
-  for (const std::string& out : outputs) require(!inputs.contains(out), "no output is also an input");
+  paths.finish();
 }
 
 }  // namespace
