@@ -57,21 +57,13 @@ Paths solidRegion(std::span<const ContourSet> sets, bool growOnly) {
 }
 
 Paths grow(const Paths& region, double mm);
+Paths shrink(const Paths& region, double mm);
 
 // Clean, oriented polygons grown by `mm` (shrunk when negative); Clipper unions the pieces.
 Paths offset(const Paths& region, double mm) {
   if (region.empty()) return {};
   if (mm == 0) return region;
-  if (mm > 0) return grow(region, mm);
-  ClipperLib::ClipperOffset offsetter(kMiterLimit);
-  // Vertices within kCleanMm of their neighbours' line go first: dense, nearly straight outlines of
-  // fine meshes otherwise make the offset's self-intersection pass the slowest step by far.
-  Paths cleaned;
-  ClipperLib::CleanPolygons(region, cleaned, kCleanMm * kOffsetUnitsPerMm);
-  offsetter.AddPaths(cleaned, ClipperLib::jtMiter, ClipperLib::etClosedPolygon);
-  Paths out;
-  offsetter.Execute(out, static_cast<double>(toUnits(mm)));
-  return out;
+  return mm > 0 ? grow(region, mm) : shrink(region, mm);
 }
 
 Paths combine(const Paths& a, const Paths& b, ClipperLib::ClipType type) {
@@ -105,6 +97,7 @@ cInt roundToUnits(double mm) {
 
 // ClipperLib::CleanPolygon (Clipper 6.4.2), re-derived on index links instead of a heap-allocated
 // node list: the same tests in the same order, so the same points. Appends the cleaned loop to `out`.
+// Growing and shrinking both clean with it.
 class LoopCleaner {
  public:
   void clean(std::span<const IntPoint> in, double distance, std::vector<IntPoint>& out) {
@@ -471,6 +464,21 @@ void appendLoop(const Path& loop, LayerContours& out) {
   for (std::size_t i = 0; i < loop.size(); ++i)
     out.points[first + i] = {static_cast<double>(loop[i].X) * kMm, static_cast<double>(loop[i].Y) * kMm};
   out.endLoop(true);
+}
+
+// The region shrunk by -mm > 0: ClipperOffset, on the outline cleaned as grow cleans it. (Vertices
+// within kCleanMm of their neighbours' line go first: dense, nearly straight outlines of fine meshes
+// otherwise make the offset's self-intersection pass the slowest step by far.)
+Paths shrink(const Paths& region, double mm) {
+  LoopCleaner& cleaner = rawScratch().cleaner;
+  Paths cleaned(region.size());
+  for (std::size_t i = 0; i < region.size(); ++i)
+    cleaner.clean(region[i], kCleanMm * kOffsetUnitsPerMm, cleaned[i]);
+  ClipperLib::ClipperOffset offsetter(kMiterLimit);
+  offsetter.AddPaths(cleaned, ClipperLib::jtMiter, ClipperLib::etClosedPolygon);
+  Paths out;
+  offsetter.Execute(out, static_cast<double>(toUnits(mm)));
+  return out;
 }
 
 void writeLoops(const Paths& paths, double z, LayerContours& out) {
