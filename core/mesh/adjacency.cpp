@@ -1,111 +1,134 @@
 #include "core/mesh/adjacency.h"
 
 #include <algorithm>
-#include <atomic>
 #include <cassert>
 #include <vector>
 
 namespace toposlice {
 namespace {
 
-constexpr std::size_t kChunk = 1 << 15;  // half-edges or vertices per chunk of a split step
+// One half-edge in its lower vertex's bucket: the upper vertex beside the half-edge's index, so matching
+// a bucket reads only the bucket.
+struct BucketEntry {
+  uint32_t other;  // the upper vertex; kTaken once grouped
+  uint32_t half;   // the half-edge
+};
+constexpr uint32_t kTaken = 0xFFFFFFFFu;
+constexpr std::size_t kSplitFrom = std::size_t{1} << 17;  // half-edges; below, one part is faster
 
 }  // namespace
 
 EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t vertexCount,
                          std::span<int32_t> adjacency, const ChunkRunner& runner) {
   assert(adjacency.size() == facetVertices.size());
-  const std::size_t halfEdges = facetVertices.size();
-  // Split only when it pays; the buckets are then filled with atomic counters, in an order that may
-  // change from run to run. Matching inside a bucket does not depend on that order (a pair is a pair,
-  // and a group of one or of three and more is counted the same), so the table and the counts are the
-  // same for any runner.
-  const bool split = runner.width > 1 && halfEdges >= 4 * kChunk;
-  const ChunkRunner& run = split ? runner : serialChunkRunner();
-  auto from = [&](std::size_t h) { return facetVertices[h - h % 3 + (h % 3 + 1) % 3]; };
-  auto to = [&](std::size_t h) { return facetVertices[h - h % 3 + (h % 3 + 2) % 3]; };
-  auto degenerateFacet = [&](std::size_t h) {
-    const uint32_t* v = &facetVertices[h - h % 3];
-    return v[0] == v[1] || v[1] == v[2] || v[0] == v[2];
-  };
-  auto add = [split](uint32_t& counter) {
-    return split ? std::atomic_ref<uint32_t>(counter).fetch_add(1, std::memory_order_relaxed) : counter++;
-  };
-  const std::size_t edgeChunks = (halfEdges / 3 + kChunk - 1) / kChunk;  // chunks of whole facets
-  auto facetRange = [&](std::size_t c0, std::size_t c1) {
-    return std::pair{3 * c0 * kChunk, std::min(halfEdges, 3 * c1 * kChunk)};
+  const std::size_t halfEdges = facetVertices.size(), facets = halfEdges / 3;
+  // The vertices are split into `parts` equal ranges, and each part owns the buckets of its range: it
+  // scans every facet but counts, files and matches only the half-edges whose lower vertex it owns. No
+  // two parts write the same word, and a bucket lists its half-edges in index order whatever the split,
+  // so the table and the counts are the same for any runner.
+  const std::size_t parts =
+      runner.width > 1 && halfEdges >= kSplitFrom ? std::min<std::size_t>(runner.width, 64) : 1;
+  const ChunkRunner& run = parts > 1 ? runner : serialChunkRunner();
+  const std::size_t partVertices = (vertexCount + parts - 1) / std::max<std::size_t>(parts, 1);
+  auto degenerate = [](const uint32_t* v) { return v[0] == v[1] || v[1] == v[2] || v[0] == v[2]; };
+  // Calls visit(h, lower, upper) for every half-edge of a non-degenerate facet whose lower vertex is in
+  // [v0, v1).
+  auto forOwned = [&](std::size_t v0, std::size_t v1, auto&& visit) {
+    for (std::size_t f = 0; f < facets; ++f) {
+      const uint32_t* v = &facetVertices[3 * f];
+      if (degenerate(v)) continue;
+      for (std::size_t j = 0; j < 3; ++j) {
+        const uint32_t a = v[(j + 1) % 3], b = v[(j + 2) % 3];
+        const uint32_t lower = std::min(a, b);
+        if (lower >= v0 && lower < v1) visit(3 * f + j, lower, std::max(a, b));
+      }
+    }
   };
 
-  std::vector<uint32_t> offsets(vertexCount + 1, 0);
-  std::vector<uint64_t> degenerate(edgeChunks, 0);
-  run.run(edgeChunks, 1, [&](std::size_t c0, std::size_t c1) {
-    const auto [begin, end] = facetRange(c0, c1);
-    for (std::size_t h = begin; h < end; ++h) {
-      if (degenerateFacet(h)) {
-        if (h % 3 == 0) ++degenerate[c0];
-        continue;
-      }
-      add(offsets[std::min(from(h), to(h)) + 1]);
+  auto from = [&](uint32_t h) { return facetVertices[h - h % 3 + (h % 3 + 1) % 3]; };
+
+  // Every entry starts as "no neighbour" (degenerate facets keep it); the matching writes the pairs.
+  constexpr std::size_t kFacetChunk = std::size_t{1} << 15;
+  const std::size_t facetChunks = (facets + kFacetChunk - 1) / kFacetChunk;
+  std::vector<uint64_t> degenerateFacets(facetChunks, 0);
+  run.run(facetChunks, 1, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c) {
+      const std::size_t f1 = std::min(facets, (c + 1) * kFacetChunk);
+      std::fill(adjacency.begin() + static_cast<std::ptrdiff_t>(3 * c * kFacetChunk),
+                adjacency.begin() + static_cast<std::ptrdiff_t>(3 * f1), -1);
+      for (std::size_t f = c * kFacetChunk; f < f1; ++f)
+        degenerateFacets[c] += degenerate(&facetVertices[3 * f]);
     }
   });
-  for (std::size_t v = 0; v < vertexCount; ++v) offsets[v + 1] += offsets[v];
-  std::vector<uint32_t> bucket(offsets[vertexCount]);
-  {
-    std::vector<uint32_t> fill(offsets.begin(), offsets.end() - 1);
-    run.run(edgeChunks, 1, [&](std::size_t c0, std::size_t c1) {
-      const auto [begin, end] = facetRange(c0, c1);
-      for (std::size_t h = begin; h < end; ++h)
-        if (!degenerateFacet(h)) bucket[add(fill[std::min(from(h), to(h))])] = static_cast<uint32_t>(h);
-    });
-  }
-  run.run(edgeChunks, 1, [&](std::size_t c0, std::size_t c1) {
-    const auto [begin, end] = facetRange(c0, c1);
-    std::fill(adjacency.begin() + static_cast<std::ptrdiff_t>(begin),
-              adjacency.begin() + static_cast<std::ptrdiff_t>(end), -1);
-  });
 
-  // Each vertex chunk matches the half-edges of its buckets: it writes only their entries.
-  const std::size_t vertexChunks = (vertexCount + kChunk - 1) / kChunk;
-  std::vector<EdgeStats> chunkStats(vertexChunks);
-  run.run(vertexChunks, 1, [&](std::size_t c0, std::size_t c1) {
-    EdgeStats& stats = chunkStats[c0];
-    std::vector<uint32_t> group;
-    for (std::size_t v = c0 * kChunk; v < std::min(vertexCount, c1 * kChunk); ++v) {
-      const uint32_t begin = offsets[v], end = offsets[v + 1];
-      for (uint32_t i = begin; i < end; ++i) {
-        const uint32_t hi = bucket[i];
-        if (hi == UINT32_MAX) continue;  // already grouped
-        const uint32_t other = std::max(from(hi), to(hi));
-        group.assign(1, hi);
-        for (uint32_t j = i + 1; j < end; ++j) {
-          const uint32_t hj = bucket[j];
-          if (hj != UINT32_MAX && std::max(from(hj), to(hj)) == other) {
-            group.push_back(hj);
-            bucket[j] = UINT32_MAX;
+  std::vector<uint32_t> offsets(vertexCount + 1, 0);
+  std::vector<std::size_t> partEntries(parts + 1, 0);
+  run.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
+    for (std::size_t p = p0; p < p1; ++p) {
+      const std::size_t v0 = std::min(vertexCount, p * partVertices),
+                        v1 = std::min(vertexCount, (p + 1) * partVertices);
+      forOwned(v0, v1, [&](std::size_t, uint32_t lower, uint32_t) { ++offsets[lower + 1]; });
+      std::size_t total = 0;
+      for (std::size_t v = v0; v < v1; ++v) total += offsets[v + 1];
+      partEntries[p + 1] = total;
+    }
+  });
+  for (std::size_t p = 0; p < parts; ++p) partEntries[p + 1] += partEntries[p];
+  std::vector<BucketEntry> bucket(partEntries[parts]);
+  std::vector<EdgeStats> partStats(parts);
+  run.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
+    for (std::size_t p = p0; p < p1; ++p) {
+      const std::size_t v0 = std::min(vertexCount, p * partVertices),
+                        v1 = std::min(vertexCount, (p + 1) * partVertices);
+      // Offsets of the part's buckets (a prefix sum from the part's first entry), then the buckets.
+      uint32_t at = static_cast<uint32_t>(partEntries[p]);
+      for (std::size_t v = v0; v < v1; ++v) {
+        const uint32_t count = offsets[v + 1];
+        offsets[v + 1] = at;  // fill position of bucket v, until filled: then its start of v + 1
+        at += count;
+      }
+      forOwned(v0, v1, [&](std::size_t h, uint32_t lower, uint32_t upper) {
+        bucket[offsets[lower + 1]++] = {upper, static_cast<uint32_t>(h)};
+      });
+      // Each bucket matches its half-edges: a pair is an edge of two facets; a group of one or of three
+      // and more, or a pair in the same direction, has no neighbour.
+      EdgeStats& stats = partStats[p];
+      for (std::size_t v = v0; v < v1; ++v) {
+        const uint32_t begin = v == v0 ? static_cast<uint32_t>(partEntries[p]) : offsets[v],
+                       end = offsets[v + 1];
+        for (uint32_t i = begin; i < end; ++i) {
+          const uint32_t other = bucket[i].other;
+          if (other == kTaken) continue;
+          const uint32_t first = bucket[i].half;
+          uint32_t second = 0, group = 1;
+          for (uint32_t j = i + 1; j < end; ++j)
+            if (bucket[j].other == other) {
+              if (++group == 2) second = bucket[j].half;
+              bucket[j].other = kTaken;
+            }
+          ++stats.edges;
+          if (group == 1) {
+            ++stats.boundary;
+          } else if (group > 2) {
+            ++stats.nonManifold;
+          } else if (from(first) == from(second) || first / 3 == second / 3) {
+            ++stats.inconsistent;
+          } else {
+            adjacency[first] = static_cast<int32_t>(second / 3);
+            adjacency[second] = static_cast<int32_t>(first / 3);
           }
-        }
-        ++stats.edges;
-        if (group.size() == 1) {
-          ++stats.boundary;
-        } else if (group.size() > 2) {
-          ++stats.nonManifold;
-        } else if (from(group[0]) == from(group[1]) || group[0] / 3 == group[1] / 3) {
-          ++stats.inconsistent;
-        } else {
-          adjacency[group[0]] = static_cast<int32_t>(group[1] / 3);
-          adjacency[group[1]] = static_cast<int32_t>(group[0] / 3);
         }
       }
     }
   });
   EdgeStats stats;
-  for (const EdgeStats& s : chunkStats) {
+  for (const EdgeStats& s : partStats) {
     stats.edges += s.edges;
     stats.boundary += s.boundary;
     stats.nonManifold += s.nonManifold;
     stats.inconsistent += s.inconsistent;
   }
-  for (const uint64_t d : degenerate) stats.degenerateFacets += d;
+  for (const uint64_t d : degenerateFacets) stats.degenerateFacets += d;
   return stats;
 }
 

@@ -25,10 +25,11 @@ struct EdgeStats {
 };
 
 // Builds the table from welded facet-vertex indices (3 per facet, all < vertexCount) in expected linear
-// time: half-edges are bucketed by their lower vertex (count, prefix sum, fill), then matched inside
-// each small bucket. `adjacency` must hold 3 entries per facet; every entry is written. With a
-// parallel runner (core/chunk_runner.h) each step runs in chunks; the table and the counts are the same
-// for any runner.
+// time: half-edges are bucketed by their lower vertex (count, prefix sum, fill), each with its upper
+// vertex, then matched inside each small bucket. `adjacency` must hold 3 entries per facet; every entry
+// is written. With a parallel runner (core/chunk_runner.h) the vertices are split into one range per
+// thread, each range's buckets built and matched by one chunk without atomics; the table and the counts
+// are the same for any runner.
 EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t vertexCount,
                          std::span<int32_t> adjacency, const ChunkRunner& runner = serialChunkRunner());
 
