@@ -4,7 +4,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config git
   libtbb-dev libembree-dev libopenvdb-dev libboost-iostreams-dev libopenexr-dev
-  zlib1g-dev libdeflate-dev libspng-dev libzip-dev libminizip-dev nlohmann-json3-dev libcli11-dev lib3mf-dev libtinyobjloader-dev
+  zlib1g-dev libdeflate-dev libisal-dev libspng-dev libzip-dev libminizip-dev nlohmann-json3-dev libcli11-dev lib3mf-dev libtinyobjloader-dev
   libgtest-dev libgmock-dev libbenchmark-dev libtinyexr-dev libpolyclipping-dev
   openexr libopenvdb-tools
   openmpi-bin libopenmpi-dev

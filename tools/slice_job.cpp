@@ -68,9 +68,11 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
   return sinks;
 }
 
-void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats) {
+void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats, IndexedMesh* welded) {
   const ChunkRunner runner = parallelChunkRunner();
-  const IndexedMesh mesh = weldCorners(soup.corners, runner);
+  const IndexedMesh mesh = welded && welded->facetVertices.size() == soup.corners.size()
+                               ? std::move(*welded)
+                               : weldCorners(soup.corners, runner);
   table.resize(soup.corners.size());
   const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table, runner);
   if (stats) *stats = s;
@@ -79,7 +81,8 @@ void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* s
 // The model's adjacency: loaded from a verified template, built, or none (cp / sr-lazy discover it).
 std::span<const int32_t> modelTopology(const std::filesystem::path& model, const FacetSoup& soup,
                                        const TemplateTable* templateTable, const SliceJobOptions& options,
-                                       SliceJobResult& result, std::vector<int32_t>& built) {
+                                       SliceJobResult& result, std::vector<int32_t>& built,
+                                       IndexedMesh* welded) {
   const SliceMethod method = options.slice.method;
   bool build = method == SliceMethod::SelfReuse;
   if (templateTable != nullptr && method != SliceMethod::ClosestPoint) {
@@ -96,7 +99,7 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
     result.topology = "template mismatch (" + mismatch->reason + "), rebuilt";
   }
   if (build) {
-    buildTable(soup, built, &result.edges);
+    buildTable(soup, built, &result.edges, welded);
     if (result.topology.empty()) result.topology = "built (weld + adjacency)";
     return built;
   }
@@ -539,10 +542,17 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   std::vector<FacetSoup> features(featurePaths.size());  // add-ons first, then removals
   const std::size_t reads = 1 + featurePaths.size() + (readTemplate ? 1 : 0);
   std::vector<std::exception_ptr> readErrors(reads);
+  // The model is welded while it is read where the reader can (a gzip'd binary STL) and the weld is
+  // needed as read: the table is built, and no scaling correction changes the corners first.
+  IndexedMesh welded;
+  MeshReadOptions modelRead = options.read;
+  if (options.slice.method == SliceMethod::SelfReuse && templateTable == nullptr && !readTemplate &&
+      !options.print.scales())
+    modelRead.weld = &welded;
   parallelForChunks(reads, 1, [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i) try {
         if (i == 0)
-          soup = readMesh(model, options.read, &result.source);
+          soup = readMesh(model, modelRead, &result.source);
         else if (i <= featurePaths.size())
           features[i - 1] = readMesh(featurePaths[i - 1], options.read);
         else
@@ -587,6 +597,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (result.inverted && options.fixOrientation) {
     for (std::size_t c = 0; c < soup.corners.size(); c += 3)
       std::swap(soup.corners[c + 1], soup.corners[c + 2]);
+    for (std::size_t c = 0; c + 2 < welded.facetVertices.size(); c += 3)
+      std::swap(welded.facetVertices[c + 1], welded.facetVertices[c + 2]);
     result.flipped = true;
   }
 
@@ -599,7 +611,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   std::vector<std::vector<int32_t>> featureTables(features.size());
   const auto topology = [&] {
     const auto begin = std::chrono::steady_clock::now();
-    adjacency = modelTopology(model, soup, templateTable, options, result, built);
+    adjacency = modelTopology(model, soup, templateTable, options, result, built, &welded);
     // Features are separate meshes with their own tables; the template's table is never touched.
     if (method == SliceMethod::SelfReuse)
       for (std::size_t i = 0; i < features.size(); ++i) buildTable(features[i], featureTables[i]);

@@ -29,14 +29,18 @@ std::vector<std::unique_ptr<ContourSink>> openContourSinks(const SliceJobOptions
                                                            double layerHeight);
 
 // Welds `soup` and builds its adjacency into `table` (3 per facet); `stats` receives the edge counts.
-void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats = nullptr);
+// `welded`, when its facetVertices match the soup's corners, is the soup already welded (the reader
+// welds a gzip'd binary STL while it inflates, MeshReadOptions::weld); it is moved from.
+void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* stats = nullptr,
+                IndexedMesh* welded = nullptr);
 
 // The model's adjacency: the template's after the linear check, built (into `built`), or none, as
 // options.slice.method needs. Fills result.topology (and result.edges when built). A variant whose
 // connectivity differs throws InputError naming `model` unless options.rebuildOnMismatch.
 std::span<const int32_t> modelTopology(const std::filesystem::path& model, const FacetSoup& soup,
                                        const TemplateTable* templateTable, const SliceJobOptions& options,
-                                       SliceJobResult& result, std::vector<int32_t>& built);
+                                       SliceJobResult& result, std::vector<int32_t>& built,
+                                       IndexedMesh* welded = nullptr);
 
 // The layer height as given (see slice_job.cpp).
 double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes);

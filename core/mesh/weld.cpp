@@ -28,37 +28,9 @@ inline uint64_t hashKey(const CornerKey& k) {
 constexpr uint32_t kEmpty = 0xFFFFFFFFu;
 
 IndexedMesh weldSerially(std::span<const Point3f> corners) {
-  IndexedMesh mesh;
-  mesh.facetVertices.resize(corners.size());
-  std::size_t capacity = 16;
-  while (capacity < corners.size() * 2) capacity <<= 1;  // load factor <= 1/2 even with no sharing
-  const uint64_t mask = capacity - 1;
-  std::vector<uint32_t> table(capacity, kEmpty);
-  std::vector<CornerKey> keys;
-  keys.reserve(corners.size() / 4 + 16);
-  mesh.vertices.reserve(corners.size() / 4 + 16);
-  for (std::size_t c = 0; c < corners.size(); ++c) {
-    const CornerKey key = keyOf(corners[c]);
-    uint64_t slot = hashKey(key) & mask;
-    for (;;) {
-      const uint32_t v = table[slot];
-      if (v == kEmpty) {
-        const auto index = static_cast<uint32_t>(mesh.vertices.size());
-        table[slot] = index;
-        keys.push_back(key);
-        mesh.vertices.push_back(corners[c]);
-        mesh.facetVertices[c] = index;
-        break;
-      }
-      const CornerKey& k = keys[v];
-      if (k.x == key.x && k.y == key.y && k.z == key.z) {
-        mesh.facetVertices[c] = v;
-        break;
-      }
-      slot = (slot + 1) & mask;
-    }
-  }
-  return mesh;
+  IncrementalWeld weld(corners.size());
+  weld.add(corners);
+  return weld.take();
 }
 
 // The split weld. Corners are partitioned by their hash, so equal corners meet in one partition; each
@@ -149,6 +121,56 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
 }
 
 }  // namespace
+
+IncrementalWeld::IncrementalWeld(std::size_t expectedCorners) {
+  std::size_t capacity = 16;
+  while (capacity < expectedCorners * 2) capacity <<= 1;  // load factor <= 1/2 even with no sharing
+  mask_ = capacity - 1;
+  table_.assign(capacity, kEmpty);
+  keys_.reserve(expectedCorners / 4 + 16);
+  mesh_.vertices.reserve(expectedCorners / 4 + 16);
+  mesh_.facetVertices.reserve(expectedCorners);
+}
+
+void IncrementalWeld::add(std::span<const Point3f> corners) {
+  if (2 * (mesh_.facetVertices.size() + corners.size()) > table_.size()) {
+    // More corners than expected: a table twice as large, the vertices re-inserted.
+    std::size_t capacity = table_.size();
+    while (capacity < 2 * (mesh_.facetVertices.size() + corners.size())) capacity <<= 1;
+    mask_ = capacity - 1;
+    table_.assign(capacity, kEmpty);
+    for (std::size_t v = 0; v < keys_.size(); ++v) {
+      const CornerKey key{keys_[v].x, keys_[v].y, keys_[v].z};
+      uint64_t slot = hashKey(key) & mask_;
+      while (table_[slot] != kEmpty) slot = (slot + 1) & mask_;
+      table_[slot] = static_cast<uint32_t>(v);
+    }
+  }
+  const std::size_t at = mesh_.facetVertices.size();
+  mesh_.facetVertices.resize(at + corners.size());
+  uint32_t* const out = mesh_.facetVertices.data() + at;
+  for (std::size_t c = 0; c < corners.size(); ++c) {
+    const CornerKey key = keyOf(corners[c]);
+    uint64_t slot = hashKey(key) & mask_;
+    for (;;) {
+      const uint32_t v = table_[slot];
+      if (v == kEmpty) {
+        const auto index = static_cast<uint32_t>(keys_.size());
+        table_[slot] = index;
+        keys_.push_back({key.x, key.y, key.z});
+        mesh_.vertices.push_back(corners[c]);
+        out[c] = index;
+        break;
+      }
+      const Key& k = keys_[v];
+      if (k.x == key.x && k.y == key.y && k.z == key.z) {
+        out[c] = v;
+        break;
+      }
+      slot = (slot + 1) & mask_;
+    }
+  }
+}
 
 IndexedMesh weldCorners(std::span<const Point3f> corners, const ChunkRunner& runner) {
   constexpr std::size_t kSplitFrom = std::size_t{1}

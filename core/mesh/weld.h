@@ -7,7 +7,9 @@
 // result is the same, bit for bit, for any runner and thread count.
 #pragma once
 
+#include <cstdint>
 #include <span>
+#include <vector>
 
 #include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
@@ -15,5 +17,23 @@
 namespace toposlice {
 
 IndexedMesh weldCorners(std::span<const Point3f> corners, const ChunkRunner& runner = serialChunkRunner());
+
+// The serial weld fed a piece at a time, in corner order (a reader welds corners as they arrive): the
+// result is weldCorners' for all the pieces joined, bit for bit (weldCorners' serial form is this).
+class IncrementalWeld {
+ public:
+  explicit IncrementalWeld(std::size_t expectedCorners);
+  void add(std::span<const Point3f> corners);
+  IndexedMesh take() { return std::move(mesh_); }
+
+ private:
+  struct Key {
+    uint32_t x, y, z;
+  };
+  IndexedMesh mesh_;
+  std::vector<uint32_t> table_;  // per slot a vertex number, or empty
+  std::vector<Key> keys_;        // per vertex its coordinate bits
+  uint64_t mask_ = 0;
+};
 
 }  // namespace toposlice

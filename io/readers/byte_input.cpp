@@ -1,6 +1,7 @@
 #include "io/readers/byte_input.h"
 
 #include <fcntl.h>
+#include <isa-l/igzip_lib.h>
 #include <libdeflate.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -153,6 +154,73 @@ bool inflateWhole(std::span<const std::byte> in, std::size_t sizeHint, ByteBuffe
   if (rc != LIBDEFLATE_SUCCESS || inUsed != in.size() || outSize != sizeHint) return false;
   out.size = outSize;
   return true;
+}
+
+GzipStream::GzipStream(std::span<const std::byte> in) : in_(in), capacity_(gzipSizeHint(in)) {
+  // ISA-L counts input in 32 bits; a size of 0 (an empty or forged trailer) is not the common case.
+  if (capacity_ == 0 || in.size() > UINT32_MAX) {
+    publish(kEnded);
+    return;
+  }
+  buffer_.reserveExactly(capacity_);
+  thread_ = std::thread([this] { inflateAll(); });
+}
+
+GzipStream::~GzipStream() {
+  stop_.store(true, std::memory_order_relaxed);
+  if (thread_.joinable()) thread_.join();
+}
+
+void GzipStream::publish(uint64_t state) {
+  state_.store(state, std::memory_order_release);
+  state_.notify_all();
+}
+
+void GzipStream::inflateAll() {
+  constexpr uint32_t kPiece = 256 << 10;  // bytes a reader can parse while the next piece inflates
+  inflate_state s;
+  isal_inflate_init(&s);
+  s.crc_flag = ISAL_GZIP;  // header parsed, CRC-32 checked against the trailer
+  s.next_in = const_cast<uint8_t*>(reinterpret_cast<const uint8_t*>(in_.data()));
+  s.avail_in = static_cast<uint32_t>(in_.size());
+  auto* const out = reinterpret_cast<uint8_t*>(buffer_.data.get());
+  std::size_t produced = 0;
+  uint8_t beyond = 0;  // room for one byte past the expected size: writing it means the size was wrong
+  while (!stop_.load(std::memory_order_relaxed)) {
+    const bool full = produced == capacity_;
+    s.next_out = full ? &beyond : out + produced;
+    s.avail_out = full ? 1 : static_cast<uint32_t>(std::min<std::size_t>(kPiece, capacity_ - produced));
+    const uint32_t room = s.avail_out;
+    const int rc = isal_inflate(&s);
+    if (full && s.avail_out == 0) break;  // longer than the trailer says
+    if (!full) produced += room - s.avail_out;
+    if (rc != ISAL_DECOMP_OK) break;
+    if (s.block_state == ISAL_BLOCK_FINISH) {
+      // Handled: one member, nothing after it, exactly the trailer's size.
+      buffer_.size = produced;
+      publish(produced | kEnded | (s.avail_in == 0 && produced == capacity_ ? kHandled : 0));
+      return;
+    }
+    if (s.avail_in == 0 && s.avail_out != 0) break;  // truncated
+    publish(produced);
+  }
+  buffer_.size = produced;
+  publish(produced | kEnded);
+}
+
+std::size_t GzipStream::waitFor(std::size_t want) {
+  uint64_t state = state_.load(std::memory_order_acquire);
+  while ((state & ~(kEnded | kHandled)) < want && (state & kEnded) == 0) {
+    state_.wait(state, std::memory_order_acquire);
+    state = state_.load(std::memory_order_acquire);
+  }
+  return static_cast<std::size_t>(state & ~(kEnded | kHandled));
+}
+
+bool GzipStream::finish() {
+  waitFor(SIZE_MAX);
+  if (thread_.joinable()) thread_.join();
+  return (state_.load(std::memory_order_acquire) & kHandled) != 0;
 }
 
 ByteBuffer gunzip(std::span<const std::byte> in, const std::string& name) {

@@ -499,6 +499,14 @@ FacetSoup parseUncompressed(std::span<const std::byte> bytes, const std::string&
 
 }  // namespace
 
+bool appendBinaryStlRecords(const std::byte* records, std::size_t count, std::vector<Point3f>& corners) {
+  return appendBinaryFacets(records, count, corners);
+}
+
+std::string binaryStlHeaderName(const std::byte* header) {
+  return headerName(header);
+}
+
 FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, StlSource* source) {
   StlSource local;
   StlSource& out = source ? *source : local;

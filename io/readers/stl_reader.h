@@ -57,6 +57,7 @@
 #include <filesystem>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
@@ -72,6 +73,12 @@ struct StlSource {
 
 // Reads a binary or ASCII STL, optionally gzip-compressed. Throws InputError("<path>: <what is wrong>")
 // on a file that cannot be read or is not a valid STL (see the contract above).
+// For readers that receive a binary STL's bytes in order (the streamed gzip read, mesh_reader.cpp): the
+// corners of `count` 50-byte facet records appended to `corners` (true when a coordinate is NaN or
+// infinite), and the solid name that StlSource gives for an 80-byte header.
+bool appendBinaryStlRecords(const std::byte* records, std::size_t count, std::vector<Point3f>& corners);
+std::string binaryStlHeaderName(const std::byte* header);
+
 FacetSoup readStl(const std::filesystem::path& path, StlSource* source = nullptr);
 
 // Same, from bytes already in memory (used by fuzzers); `name` starts every error message.

@@ -1,0 +1,204 @@
+// The streamed gzip read (io/readers/byte_input.h GzipStream, mesh_reader.cpp): a gzip'd binary STL read
+// on more than one thread is parsed, and welded, while it inflates. Against the serial read: the same
+// soup, source and weld, or the same error message, for the shared models and for streams damaged in
+// every way the stream can end early, run long or lie about its size.
+#include <gtest/gtest.h>
+#include <zlib.h>
+
+#include <cmath>
+#include <cstring>
+#include <initializer_list>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "core/mesh/weld.h"
+#include "io/errors.h"
+#include "io/readers/byte_input.h"
+#include "io/readers/mesh_reader.h"
+#include "parallel/parallel.h"
+#include "tests/fixtures/models.h"
+
+namespace toposlice {
+namespace {
+
+using Bytes = std::vector<std::byte>;
+
+Bytes fileBytes(const std::string& model) {
+  const ByteBuffer file = readWholeFile(fixtures::modelPath(model));
+  return Bytes(file.data.get(), file.data.get() + file.size);
+}
+
+// zlib's gzip of `in` at `level`, as one member.
+Bytes gzipped(const Bytes& in, int level = 6) {
+  z_stream s{};
+  EXPECT_EQ(deflateInit2(&s, level, Z_DEFLATED, 16 + MAX_WBITS, 8, Z_DEFAULT_STRATEGY), Z_OK);
+  Bytes out(deflateBound(&s, static_cast<uLong>(in.size())) + 32);
+  s.next_in = const_cast<Bytef*>(reinterpret_cast<const Bytef*>(in.data()));
+  s.avail_in = static_cast<uInt>(in.size());
+  s.next_out = reinterpret_cast<Bytef*>(out.data());
+  s.avail_out = static_cast<uInt>(out.size());
+  EXPECT_EQ(deflate(&s, Z_FINISH), Z_STREAM_END);
+  out.resize(s.total_out);
+  deflateEnd(&s);
+  return out;
+}
+
+Bytes gunzipped(const Bytes& gz) {
+  const ByteBuffer whole = gunzip(gz, "t");
+  return Bytes(whole.data.get(), whole.data.get() + whole.size);
+}
+
+// A binary STL of `corners`.
+Bytes binaryStl(const std::vector<Point3f>& corners, const char* header = "binary") {
+  Bytes out(84, std::byte{0});
+  std::memcpy(out.data(), header, std::strlen(header));
+  const auto count = static_cast<uint32_t>(corners.size() / 3);
+  std::memcpy(out.data() + 80, &count, 4);
+  for (std::size_t f = 0; f < count; ++f) {
+    std::byte record[50] = {};
+    std::memcpy(record + 12, &corners[3 * f], 36);
+    out.insert(out.end(), record, record + 50);
+  }
+  return out;
+}
+
+// What one read gives: the soup's bytes and its source, or the error message; and the weld it left.
+struct Outcome {
+  std::string result;
+  IndexedMesh weld;
+};
+
+Outcome readWith(const Bytes& bytes, const ChunkRunner& runner, bool weld, double scale = 1.0) {
+  Outcome o;
+  MeshReadOptions options;
+  options.runner = runner;
+  options.scale = scale;
+  if (weld) options.weld = &o.weld;
+  try {
+    MeshSource source;
+    const FacetSoup soup = parseMesh(bytes, "t.stl.gz", options, &source);
+    o.result = std::string(reinterpret_cast<const char*>(soup.corners.data()), soup.corners.size() * 12) +
+               "|" + meshFormatName(source.format) + (source.binary ? " binary " : " text ") +
+               (source.gzip ? "gzip " : "") + source.name;
+  } catch (const InputError& e) {
+    o.result = std::string("error: ") + e.what();
+  }
+  return o;
+}
+
+// The serial read and the streamed one (2 and 3 threads, with and without the weld) agree; the weld is
+// either left empty or is the serial weld of the soup. Returns whether the streamed read welded.
+bool expectSameRead(const Bytes& bytes, const std::string& what, double scale = 1.0,
+                    std::initializer_list<unsigned> threadCounts = {2, 3}) {
+  const Outcome serial = readWith(bytes, serialChunkRunner(), true, scale);
+  EXPECT_TRUE(serial.weld.facetVertices.empty()) << what << ": the serial read does not weld";
+  bool welded = false;
+  for (const unsigned threads : threadCounts)
+    for (const bool weld : {false, true}) {
+      ThreadLimit limit(threads);
+      const Outcome streamed = readWith(bytes, parallelChunkRunner(), weld, scale);
+      EXPECT_EQ(streamed.result.substr(0, 300), serial.result.substr(0, 300)) << what;
+      EXPECT_TRUE(streamed.result == serial.result) << what << ", " << threads << " threads";
+      if (streamed.weld.facetVertices.empty()) continue;
+      welded = true;
+      EXPECT_TRUE(weld) << what;
+      FacetSoup soup;
+      soup.corners.resize(streamed.weld.facetVertices.size());
+      std::memcpy(soup.corners.data(), streamed.result.data(), soup.corners.size() * 12);
+      const IndexedMesh expected = weldCorners(soup.corners);
+      EXPECT_EQ(streamed.weld.facetVertices, expected.facetVertices) << what;
+      EXPECT_TRUE(streamed.weld.vertices.size() == expected.vertices.size() &&
+                  std::memcmp(streamed.weld.vertices.data(), expected.vertices.data(),
+                              expected.vertices.size() * 12) == 0)
+          << what;
+    }
+  return welded;
+}
+
+TEST(StreamedGzip, SharedModelsReadAsSerially) {
+  for (const char* model : {"derived/aligner_upper_case0.stl.gz", "derived/femur_S001_sub2.stl.gz",
+                            "derived/spine_L2-L5_sub1.stl.gz", "benchy_3dbenchy.stl.gz", "igea.stl.gz"}) {
+    SCOPED_TRACE(model);
+    EXPECT_TRUE(expectSameRead(fileBytes(model), model)) << "binary: parsed and welded while inflating";
+  }
+  // ASCII inside gzip: inflated by the stream, then read the general way; no weld.
+  EXPECT_FALSE(expectSameRead(fileBytes("bunny_stanford_ascii.stl.gz"), "ascii"));
+}
+
+TEST(StreamedGzip, GzipStreamGivesTheInflatedBytes) {
+  const Bytes gz = fileBytes("derived/femur_S001_sub2.stl.gz");
+  GzipStream stream(gz);
+  const Bytes expected = gunzipped(gz);
+  EXPECT_EQ(stream.expectedSize(), expected.size());
+  EXPECT_GE(stream.waitFor(1000), 1000u);
+  ASSERT_TRUE(stream.finish());
+  const std::span<const std::byte> got = stream.inflated();
+  ASSERT_EQ(got.size(), expected.size());
+  EXPECT_EQ(std::memcmp(got.data(), expected.data(), got.size()), 0);
+
+  // Destroyed while inflating: it stops without being waited on.
+  { GzipStream abandoned(gz); }
+}
+
+TEST(StreamedGzip, DamagedOrUnusualStreamsReadAsSerially) {
+  const auto expectSameRead = [](const Bytes& bytes, const std::string& what, double scale = 1.0) {
+    return toposlice::expectSameRead(bytes, what, scale, {3});
+  };
+  const FacetSoup femur = readMesh(fixtures::modelPath("derived/femur_S001_sub2.stl.gz"));
+  const Bytes stl = binaryStl(femur.corners, "femur");
+  const Bytes gz = gzipped(stl);
+  EXPECT_TRUE(expectSameRead(gz, "whole"));
+  EXPECT_TRUE(expectSameRead(gzipped(stl, 0), "stored blocks"));
+  EXPECT_TRUE(expectSameRead(gzipped(stl, 9), "level 9"));
+  EXPECT_FALSE(expectSameRead(gz, "scaled", 2.0)) << "a scaled soup is not welded by the reader";
+
+  // Cut anywhere: a truncated stream.
+  for (const double at : {0.0001, 0.01, 0.3, 0.9, 0.9999})
+    expectSameRead(
+        Bytes(gz.begin(), gz.begin() + static_cast<std::ptrdiff_t>(at * static_cast<double>(gz.size()))),
+        "cut at " + std::to_string(at));
+  expectSameRead(Bytes(gz.begin(), gz.end() - 1), "trailer cut");
+  // Bytes changed in the middle, and in the CRC.
+  Bytes damaged = gz;
+  for (std::size_t i = 0; i < 32; ++i) damaged[gz.size() / 2 + i] ^= std::byte{0x5A};
+  expectSameRead(damaged, "damaged");
+  Bytes badCrc = gz;
+  badCrc[gz.size() - 6] ^= std::byte{1};
+  expectSameRead(badCrc, "bad CRC");
+  // Something after the member: garbage, or a second member.
+  Bytes trailing = gz;
+  trailing.push_back(std::byte{'x'});
+  expectSameRead(trailing, "trailing byte");
+  const std::size_t half = 84 + 50 * (femur.facetCount() / 2);
+  Bytes twoMembers = gzipped(Bytes(stl.begin(), stl.begin() + static_cast<std::ptrdiff_t>(half)));
+  const Bytes second = gzipped(Bytes(stl.begin() + static_cast<std::ptrdiff_t>(half), stl.end()));
+  twoMembers.insert(twoMembers.end(), second.begin(), second.end());
+  expectSameRead(twoMembers, "two members");
+  // A trailer whose size is not the stream's: larger, smaller, zero.
+  for (const uint32_t size : {uint32_t(stl.size() + 50), uint32_t(stl.size() - 50), uint32_t{0}}) {
+    Bytes lying = gz;
+    std::memcpy(lying.data() + lying.size() - 4, &size, 4);
+    expectSameRead(lying, "trailer says " + std::to_string(size));
+  }
+
+  // Content that is not a clean binary STL: a NaN, a count that does not match, no facets, a header
+  // that makes it PLY, and ASCII.
+  std::vector<Point3f> withNan = femur.corners;
+  withNan[withNan.size() / 2].y = std::numeric_limits<float>::quiet_NaN();
+  expectSameRead(gzipped(binaryStl(withNan)), "a NaN");
+  Bytes wrongCount = stl;
+  wrongCount[80] ^= std::byte{1};
+  expectSameRead(gzipped(wrongCount), "a count that does not match");
+  expectSameRead(gzipped(binaryStl({})), "no facets");
+  expectSameRead(gzipped(binaryStl(femur.corners, "ply\nformat ascii 1.0\n")), "a header that says PLY");
+  const std::string ascii =
+      "solid a\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 1 0 0\n"
+      "vertex 0 1 0\nendloop\nendfacet\nendsolid a\n";
+  expectSameRead(gzipped(Bytes(reinterpret_cast<const std::byte*>(ascii.data()),
+                               reinterpret_cast<const std::byte*>(ascii.data()) + ascii.size())),
+                 "ascii");
+}
+
+}  // namespace
+}  // namespace toposlice
