@@ -6,10 +6,12 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_pipeline.h>
+#include <tbb/task_group.h>
 
 #include <atomic>
 #include <exception>
 #include <optional>
+#include <utility>
 #include <vector>
 
 namespace toposlice {
@@ -80,6 +82,40 @@ void parallelInvoke(const std::function<void()>& a, const std::function<void()>&
   edges.joined();
   if (errorA) std::rethrow_exception(errorA);
   if (errorB) std::rethrow_exception(errorB);
+}
+
+struct BackgroundTask::Impl {
+  std::function<void()> work;
+  std::exception_ptr error;
+  SchedulerEdges edges;
+  tbb::task_group group;
+  bool waited = false;
+};
+
+BackgroundTask::BackgroundTask(std::function<void()> work) : impl_(std::make_unique<Impl>()) {
+  impl_->work = std::move(work);
+  Impl& t = *impl_;
+  t.group.run([&t] {
+    t.edges.taskStarts();
+    try {
+      t.work();
+    } catch (...) {
+      t.error = std::current_exception();
+    }
+    t.edges.taskEnds();
+  });
+}
+
+BackgroundTask::~BackgroundTask() {
+  if (!impl_->waited) impl_->group.wait();
+}
+
+void BackgroundTask::wait() {
+  if (impl_->waited) return;
+  impl_->group.wait();
+  impl_->waited = true;
+  impl_->edges.joined();
+  if (impl_->error) std::rethrow_exception(std::exchange(impl_->error, nullptr));
 }
 
 void orderedPipeline(std::size_t count, std::size_t inFlight,

@@ -39,6 +39,23 @@ ChunkRunner parallelChunkRunner();
 // timing.
 void parallelInvoke(const std::function<void()>& a, const std::function<void()>& b);
 
+// Runs `work` as a task beside what the caller does next: a free thread takes it, or the thread that
+// waits runs it then. wait() returns once it is done and rethrows what it threw (once); the destructor
+// waits too and drops any exception. A waiting thread runs other tasks meanwhile, so a pipeline stage
+// may wait for it.
+class BackgroundTask {
+ public:
+  explicit BackgroundTask(std::function<void()> work);
+  ~BackgroundTask();
+  BackgroundTask(const BackgroundTask&) = delete;
+  BackgroundTask& operator=(const BackgroundTask&) = delete;
+  void wait();
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 // An ordered bounded pipeline over tasks 0..count-1: work(i, slot) runs in parallel on at most
 // `inFlight` tasks at once, each given a slot index in [0, inFlight) that no other running task holds
 // (for per-slot buffers); then consume(i, slot) runs serially, in ascending i. Memory stays bounded by

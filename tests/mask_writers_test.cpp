@@ -18,6 +18,7 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "io/errors.h"
@@ -26,6 +27,7 @@
 #include "io/masks/mask_sink.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
+#include "tests/fixtures/shapes.h"
 #include "tests/tinyexr_read.h"
 
 namespace toposlice {
@@ -868,6 +870,51 @@ TEST_F(Sl1Archive, EncodesItselfWithoutPngAndIsReproducible) {
   MaskImage back;
   ASSERT_TRUE(decodeMaskPng(z.entries.at("part00001.png"), back));
   EXPECT_TRUE(back.pixels == discMask(20, 12, 10, 6, 3, false).pixels);
+}
+
+// Thumbnails drawn when the sink is made, drawn later by drawPreviews() on another thread while layers
+// are encoded, or drawn as the first layer is written (deferred, never asked): the same archive, with the
+// thumbnails first. Layers larger than the writer's 1 MiB buffer go out around it.
+TEST_F(Sl1Archive, DeferredThumbnailsGiveTheSameArchive) {
+  const FacetSoup model = fixtures::sphere(4.0, 48, 24);
+  MaskJob job = smallJob(1200, 900, 3, true);
+  job.created = 1700000000;
+  job.previewModel = model.corners;
+  std::vector<MaskImage> masks;
+  std::mt19937 random(3);
+  for (uint32_t k = 0; k < 3; ++k) {
+    MaskImage m = discMask(1200, 900, 600, 450, 100.0 + 50 * k, true);
+    if (k == 1)  // noise: a PNG of about 1 MB, past the buffer
+      for (uint8_t& p : m.pixels) p = static_cast<uint8_t>(random());
+    masks.push_back(std::move(m));
+  }
+  std::vector<std::string> files;
+  for (int way = 0; way < 3; ++way) {
+    MaskJob j = job;
+    j.deferPreviews = way > 0;
+    const fs::path out = dir_ / ("part" + std::to_string(way) + ".sl1");
+    auto sink = makeMaskSink(out, j, false);
+    std::vector<EncodedMaskLayer> encoded(3);
+    MaskEncodeScratch scratch;
+    std::thread previews;
+    if (way == 1) previews = std::thread([&sink] { sink->drawPreviews(); });
+    for (uint32_t k = 0; k < 3; ++k) sink->encodeLayer(k, 0.1 * k, masks[k], encoded[k], scratch);
+    if (previews.joinable()) previews.join();
+    for (uint32_t k = 0; k < 3; ++k) sink->writeEncodedLayer(k, 0.1 * k, encoded[k]);
+    sink->finish(j);
+    std::ifstream in(out, std::ios::binary);
+    files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const ZipContents z = readZip(out);
+    ASSERT_EQ(z.order.size(), 7u);
+    EXPECT_EQ(z.order[0], "thumbnail/thumbnail400x400.png");
+    EXPECT_EQ(z.order[1], "thumbnail/thumbnail800x480.png");
+    MaskImage back;
+    ASSERT_TRUE(decodeMaskPng(z.entries.at("part00001.png"), back));
+    EXPECT_TRUE(back.pixels == masks[1].pixels);
+  }
+  EXPECT_GT(files[0].size(), std::size_t{1} << 20);
+  EXPECT_TRUE(files[1] == files[0]);
+  EXPECT_TRUE(files[2] == files[0]);
 }
 
 TEST_F(Sl1Archive, Zip64PastSixtyFiveThousandEntries) {

@@ -11,6 +11,7 @@
 #include <fstream>
 #include <iterator>
 #include <memory>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 
@@ -663,7 +664,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       // Archive timestamps come from the model file, so the same input gives the same bytes.
       struct stat info {};
       if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
-      maskJob.previewModel = soup.corners;  // rendered by the sink now, not kept
+      // The soup outlives the sink's use of it: the SL1 thumbnails are drawn beside the first layers.
+      maskJob.previewModel = soup.corners;
+      maskJob.deferPreviews = true;
       maskJob.previewRunner = parallelChunkRunner();
       maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
       maskJob.previewModel = {};
@@ -672,6 +675,10 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
   };
   parallelInvoke(topology, setUpOutputs);
+  // Deferred previews (the SL1 thumbnails) are drawn as a task beside the bands; the first layer's
+  // write waits for them, so the archive holds them first, as when drawn before.
+  std::optional<BackgroundTask> previews;
+  if (maskSink) previews.emplace([&maskSink] { maskSink->drawPreviews(); });
 
   std::vector<SliceMesh> meshes{{soup.corners, adjacency}};
   for (std::size_t i = 0; i < features.size(); ++i) meshes.push_back({features[i].corners, featureTables[i]});
@@ -769,7 +776,10 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       else
         sinks[i]->writeLayer(k, layer);
     }
-    if (maskSink) maskSink->writeEncodedLayer(k, planes[k], r.encoded);
+    if (maskSink) {
+      if (previews) previews->wait();
+      maskSink->writeEncodedLayer(k, planes[k], r.encoded);
+    }
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
     volumeMm3 += r.area * layerThickness(planes, k, options.planes);
   };
@@ -795,6 +805,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
                           : " (the contours enclose no area on the pixel grid)"));
   for (auto& sink : sinks) sink->finish();
   if (maskSink) {
+    if (previews) previews->wait();
     maskJob.volumeMl = result.volumeMl;
     maskSink->finish(maskJob);
   }

@@ -69,9 +69,14 @@ struct MaskJob {
   uint8_t lightPwm = 255;           // UV power 0..255
   double resinDensity = 1.1;        // g/ml, for the weight of resin (GOO); the material's material_density
   // The model's facets (3 corners each) for the preview pictures (GOO, SL1 thumbnails, NanoDLP 3d.png).
-  // Read only while makeMaskSink runs: sinks render what they need then and keep no reference.
-  // Empty: the previews show no model.
+  // Read only while makeMaskSink runs: sinks render what they need then and keep no reference, unless
+  // deferPreviews. Empty: the previews show no model.
   std::span<const Point3f> previewModel;
+  // The caller keeps previewModel alive until the first layer is written (or finish), and the sinks
+  // that can draw their previews later (SL1) do so in drawPreviews() -- which the caller may run beside
+  // the first layers' encoding -- or, when it was not called, as the first layer is written. The
+  // archive is the same bytes either way.
+  bool deferPreviews = false;
   // Runs the preview renderer's chunks (the tools give parallelChunkRunner); the pictures are the same
   // for any runner.
   ChunkRunner previewRunner = serialChunkRunner();
@@ -105,6 +110,9 @@ class MaskSink {
   // Writes what encodeLayer made of layer `index`, in order, as writeLayer would have. Default: decodes
   // the runs and calls writeLayer.
   virtual void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer);
+  // Draws the preview pictures a sink deferred (MaskJob::deferPreviews). Thread-safe with encodeLayer;
+  // call at most once, and only before the first writeLayer/writeEncodedLayer/finish. Default: nothing.
+  virtual void drawPreviews() {}
   // Completes the output and moves it under its final name. finalJob is the job as known at the end
   // (volumeMl filled); the layer count written is the number of layers written. Call at most once.
   virtual void finish(const MaskJob& finalJob) = 0;

@@ -76,16 +76,21 @@ class Sl1Sink final : public EncodingMaskSink {
                         " layers (5-digit layer names); this job has " + std::to_string(job.layerCount));
     }
     job_.previewModel = {};
-    if (!job.previewModel.empty()) {  // PrusaSlicer's two thumbnails, as it names them, drawn together
-      const PreviewSize sizes[2] = {{400, 400}, {800, 480}};
-      RgbImage pictures[2];
-      renderPreviews(job.previewModel, sizes, pictures, job.previewRunner);
-      std::vector<uint8_t> png;
-      encodeRgbPng(pictures[0], png);
-      zip_.add("thumbnail/thumbnail400x400.png", png);
-      encodeRgbPng(pictures[1], png);
-      zip_.add("thumbnail/thumbnail800x480.png", png);
+    if (!job.previewModel.empty()) {
+      preview_ = job.previewModel;
+      if (!job.deferPreviews) addThumbnails();
     }
+  }
+
+  // PrusaSlicer's two thumbnails, as it names them, drawn together.
+  void drawPreviews() override {
+    if (preview_.empty() || drawn_) return;
+    const PreviewSize sizes[2] = {{400, 400}, {800, 480}};
+    RgbImage pictures[2];
+    renderPreviews(preview_, sizes, pictures, job_.previewRunner);
+    encodeRgbPng(pictures[0], thumbnails_[0]);
+    encodeRgbPng(pictures[1], thumbnails_[1]);
+    drawn_ = true;
   }
 
   // The layer's PNG and its CRC-32: the zip entry is then written raw, without a second pass over it.
@@ -101,11 +106,13 @@ class Sl1Sink final : public EncodingMaskSink {
       throw OutputError(file_.finalPath().string() + ": layer " + std::to_string(index) +
                         " arrived, expected " + std::to_string(next_));
     }
+    addThumbnails();
     zip_.add(maskLayerFileName(job_.name, index, kSl1MaxLayers, "png"), layer.bytes, layer.crc32);
     ++next_;
   }
 
   void finish(const MaskJob& finalJob) override {
+    addThumbnails();
     MaskJob job = finalJob;
     job.name = job_.name;  // the PNG names already written fix jobDir
     const std::string config = sl1ConfigIni(job, next_, created_);
@@ -122,6 +129,20 @@ class Sl1Sink final : public EncodingMaskSink {
   std::time_t created_;
   ZipStream zip_;
   uint32_t next_ = 0;
+  std::span<const Point3f> preview_;  // the model, until its thumbnails are in the archive
+  bool drawn_ = false;
+  std::vector<uint8_t> thumbnails_[2];
+
+  // The thumbnails as the archive's first entries (drawn now if drawPreviews was not called), once.
+  void addThumbnails() {
+    if (preview_.empty()) return;
+    drawPreviews();
+    zip_.add("thumbnail/thumbnail400x400.png", thumbnails_[0]);
+    zip_.add("thumbnail/thumbnail800x480.png", thumbnails_[1]);
+    preview_ = {};
+    thumbnails_[0] = {};
+    thumbnails_[1] = {};
+  }
 };
 
 }  // namespace
