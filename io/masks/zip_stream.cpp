@@ -1,8 +1,11 @@
 // ZipStream (zip_stream.h): minizip, then the Zip64 end records minizip 1.1 leaves out.
 #include "io/masks/zip_stream.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
+#include <cstring>
+#include <memory>
 #include <system_error>
 
 #include <fcntl.h>
@@ -83,16 +86,142 @@ std::string errorText(int code) {
   return code == ZIP_ERRNO ? std::generic_category().message(errno) : "zip error " + std::to_string(code);
 }
 
-voidpf ZCALLBACK openWithoutTruncating(voidpf, const void* filename, int) {
-  return std::fopen(static_cast<const char*>(filename), "r+b");
+// minizip's file functions over a 1 MiB buffer. Stdio would write each entry in several system calls:
+// minizip seeks back to patch every local header with the entry's sizes and CRC, which flushes a FILE's
+// buffer (and glibc then reads a block back on the read/write stream). Here a write lands in the buffer
+// when it falls within or right after it, so a patch of a header still buffered is a copy in memory and
+// the archive goes out in whole MiB writes. Anything else flushes and writes in place (pwrite). The
+// bytes are the ones minizip writes either way.
+struct BufferedZipFile {
+  static constexpr std::size_t kCapacity = std::size_t{1} << 20;
+  int fd = -1;
+  std::unique_ptr<char[]> buffer = std::make_unique_for_overwrite<char[]>(kCapacity);
+  uint64_t bufferAt = 0;  // file offset of buffer[0]
+  std::size_t used = 0;   // bytes of the buffer to write at bufferAt
+  uint64_t position = 0;  // where minizip reads or writes next
+  uint64_t end = 0;       // the file's length, counting what is buffered
+  int error = 0;          // errno of the first failure
+
+  bool writeAt(const char* data, std::size_t size, uint64_t at) {
+    while (size > 0) {
+      const ssize_t n = ::pwrite(fd, data, size, static_cast<off_t>(at));
+      if (n < 0 && errno == EINTR) continue;
+      if (n <= 0) {
+        error = n < 0 ? errno : EIO;
+        return false;
+      }
+      data += n;
+      size -= static_cast<std::size_t>(n);
+      at += static_cast<uint64_t>(n);
+    }
+    return true;
+  }
+  bool flush() {
+    const std::size_t n = used;
+    used = 0;
+    return error == 0 && writeAt(buffer.get(), n, bufferAt);
+  }
+};
+
+voidpf ZCALLBACK openBuffered(voidpf, const void* filename, int) {
+  // Opened without truncating: see openZipOnTemporary.
+  auto file = std::make_unique<BufferedZipFile>();
+  file->fd = ::open(static_cast<const char*>(filename), O_RDWR | O_CLOEXEC);
+  if (file->fd < 0) return nullptr;
+  struct stat st {};
+  if (::fstat(file->fd, &st) == 0) file->end = static_cast<uint64_t>(st.st_size);
+  return file.release();
+}
+
+uLong ZCALLBACK writeBuffered(voidpf, voidpf stream, const void* data, uLong size) {
+  auto& f = *static_cast<BufferedZipFile*>(stream);
+  if (f.error != 0) {
+    errno = f.error;
+    return 0;
+  }
+  const char* bytes = static_cast<const char*>(data);
+  const bool inBuffer = f.position >= f.bufferAt && f.position <= f.bufferAt + f.used;
+  if (!inBuffer || f.position - f.bufferAt + size > BufferedZipFile::kCapacity) {
+    if (!f.flush()) {
+      errno = f.error;
+      return 0;
+    }
+    f.bufferAt = f.position;
+    if (size >= BufferedZipFile::kCapacity) {
+      if (!f.writeAt(bytes, size, f.position)) {
+        errno = f.error;
+        return 0;
+      }
+      f.position += size;
+      f.bufferAt = f.position;
+      f.end = std::max(f.end, f.position);
+      return size;
+    }
+  }
+  const std::size_t at = f.position - f.bufferAt;
+  std::memcpy(f.buffer.get() + at, bytes, size);
+  f.used = std::max(f.used, at + size);
+  f.position += size;
+  f.end = std::max(f.end, f.position);
+  return size;
+}
+
+uLong ZCALLBACK readBuffered(voidpf, voidpf stream, void* data, uLong size) {
+  auto& f = *static_cast<BufferedZipFile*>(stream);
+  if (!f.flush()) {
+    errno = f.error;
+    return 0;
+  }
+  const ssize_t n = ::pread(f.fd, data, size, static_cast<off_t>(f.position));
+  if (n < 0) {
+    f.error = errno;
+    return 0;
+  }
+  f.position += static_cast<uint64_t>(n);
+  return static_cast<uLong>(n);
+}
+
+ZPOS64_T ZCALLBACK tellBuffered(voidpf, voidpf stream) {
+  return static_cast<BufferedZipFile*>(stream)->position;
+}
+
+long ZCALLBACK seekBuffered(voidpf, voidpf stream, ZPOS64_T offset, int origin) {
+  auto& f = *static_cast<BufferedZipFile*>(stream);
+  switch (origin) {
+    case ZLIB_FILEFUNC_SEEK_SET:
+      f.position = offset;
+      return 0;
+    case ZLIB_FILEFUNC_SEEK_CUR:
+      f.position += offset;
+      return 0;
+    case ZLIB_FILEFUNC_SEEK_END:
+      f.position = f.end + offset;
+      return 0;
+    default:
+      return -1;
+  }
+}
+
+int ZCALLBACK closeBuffered(voidpf, voidpf stream) {
+  std::unique_ptr<BufferedZipFile> f(static_cast<BufferedZipFile*>(stream));
+  const bool flushed = f->flush();
+  const bool closed = ::close(f->fd) == 0;
+  if (!flushed || !closed) {
+    errno = flushed ? errno : f->error;
+    return EOF;
+  }
+  return 0;
+}
+
+int ZCALLBACK errorBuffered(voidpf, voidpf stream) {
+  return static_cast<BufferedZipFile*>(stream)->error;
 }
 
 }  // namespace
 
 void* openZipOnTemporary(const std::filesystem::path& temp) {
-  zlib_filefunc64_def functions;
-  fill_fopen64_filefunc(&functions);
-  functions.zopen64_file = openWithoutTruncating;
+  zlib_filefunc64_def functions{openBuffered, readBuffered,  writeBuffered, tellBuffered,
+                                seekBuffered, closeBuffered, errorBuffered, nullptr};
   return zipOpen2_64(temp.c_str(), APPEND_STATUS_CREATE, nullptr, &functions);
 }
 
