@@ -2,7 +2,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <random>
+#include <span>
+#include <vector>
 
 #include "tests/fixtures/shapes.h"
 
@@ -47,6 +52,32 @@ TEST(Weld, SphereHasEulerVertexCount) {
   // V - E + F = 2 with E = 3F/2.
   const std::size_t f = s.facetCount();
   EXPECT_EQ(mesh.vertices.size(), 2 + f / 2);
+}
+
+// The weld fed in pieces of any size (as a reader feeds it) is the weld of the whole soup, also when
+// nothing is shared and its table must grow many times over.
+TEST(Weld, PiecesOfAnySizeGiveTheWholeWeld) {
+  std::mt19937 random(11);
+  std::vector<Point3f> corners;
+  for (int i = 0; i < 150000; ++i) {  // unique corners, with every fifth one repeating an earlier one
+    if (i % 5 == 4 && !corners.empty()) {
+      corners.push_back(corners[random() % corners.size()]);
+    } else {
+      corners.push_back({static_cast<float>(random() % 100000), static_cast<float>(i), -0.0f});
+    }
+  }
+  const IndexedMesh whole = weldCorners(corners);
+  EXPECT_GT(whole.vertices.size(), 110000u);
+  for (const std::size_t piece : {std::size_t{1}, std::size_t{7}, std::size_t{4096}, corners.size()}) {
+    IncrementalWeld weld(piece == 1 ? 3 : corners.size());  // a wrong expectation only costs growth
+    for (std::size_t at = 0; at < corners.size(); at += piece)
+      weld.add(std::span<const Point3f>(corners).subspan(at, std::min(piece, corners.size() - at)));
+    const IndexedMesh got = weld.take();
+    EXPECT_EQ(got.facetVertices, whole.facetVertices) << piece;
+    ASSERT_EQ(got.vertices.size(), whole.vertices.size()) << piece;
+    EXPECT_EQ(
+        std::memcmp(got.vertices.data(), whole.vertices.data(), whole.vertices.size() * sizeof(Point3f)), 0);
+  }
 }
 
 }  // namespace

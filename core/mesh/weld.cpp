@@ -29,7 +29,9 @@ constexpr uint32_t kEmpty = 0xFFFFFFFFu;
 
 IndexedMesh weldSerially(std::span<const Point3f> corners) {
   IncrementalWeld weld(corners.size());
-  weld.add(corners);
+  constexpr std::size_t kPiece = std::size_t{1} << 16;  // corners: the table grows only as vertices come
+  for (std::size_t at = 0; at < corners.size(); at += kPiece)
+    weld.add(corners.subspan(at, std::min(kPiece, corners.size() - at)));
   return weld.take();
 }
 
@@ -124,7 +126,9 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
 
 IncrementalWeld::IncrementalWeld(std::size_t expectedCorners) {
   std::size_t capacity = 16;
-  while (capacity < expectedCorners * 2) capacity <<= 1;  // load factor <= 1/2 even with no sharing
+  // Closed meshes share each corner among about six facets: a table for corners / 2 stays at most half
+  // full, and it doubles (the vertices re-inserted) before a piece could fill it past half.
+  while (capacity < expectedCorners / 2) capacity <<= 1;
   mask_ = capacity - 1;
   table_.assign(capacity, kEmpty);
   keys_.reserve(expectedCorners / 4 + 16);
@@ -133,10 +137,10 @@ IncrementalWeld::IncrementalWeld(std::size_t expectedCorners) {
 }
 
 void IncrementalWeld::add(std::span<const Point3f> corners) {
-  if (2 * (mesh_.facetVertices.size() + corners.size()) > table_.size()) {
-    // More corners than expected: a table twice as large, the vertices re-inserted.
+  if (2 * (keys_.size() + corners.size()) > table_.size()) {
+    // The piece could fill the table past half: a table twice as large, the vertices re-inserted.
     std::size_t capacity = table_.size();
-    while (capacity < 2 * (mesh_.facetVertices.size() + corners.size())) capacity <<= 1;
+    while (capacity < 2 * (keys_.size() + corners.size())) capacity <<= 1;
     mask_ = capacity - 1;
     table_.assign(capacity, kEmpty);
     for (std::size_t v = 0; v < keys_.size(); ++v) {
