@@ -89,6 +89,7 @@ struct BackgroundTask::Impl {
   std::exception_ptr error;
   SchedulerEdges edges;
   tbb::task_group group;
+  std::atomic<bool> finished{false};
   bool waited = false;
 };
 
@@ -103,11 +104,16 @@ BackgroundTask::BackgroundTask(std::function<void()> work) : impl_(std::make_uni
       t.error = std::current_exception();
     }
     t.edges.taskEnds();
+    t.finished.store(true, std::memory_order_release);
   });
 }
 
 BackgroundTask::~BackgroundTask() {
   if (!impl_->waited) impl_->group.wait();
+}
+
+bool BackgroundTask::done() const {
+  return impl_->waited || impl_->finished.load(std::memory_order_acquire);
 }
 
 void BackgroundTask::wait() {

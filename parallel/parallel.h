@@ -50,6 +50,9 @@ class BackgroundTask {
   BackgroundTask(const BackgroundTask&) = delete;
   BackgroundTask& operator=(const BackgroundTask&) = delete;
   void wait();
+  // Whether the work has finished (then wait() returns at once). Never blocks and never runs the work:
+  // a caller that has other things to do asks this first and waits only when it must.
+  bool done() const;
 
  private:
   struct Impl;

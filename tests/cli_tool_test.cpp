@@ -385,6 +385,27 @@ TEST_F(CliToolDeterminism, AntiAliasedSl1IsByteIdenticalForEveryThreadCountAndBa
   expectNoTemporaries();
 }
 
+// The aligner's 545k facets take far longer to draw as SL1 thumbnails than its first layers take to
+// slice: on more than one thread the first layers are set aside until the thumbnails are in the archive
+// (slice_job.cpp, "Deferred previews"). The archive is still the one-thread archive, byte for byte.
+TEST_F(CliToolDeterminism, Sl1WithLayersHeldForTheThumbnailsIsTheOneThreadArchive) {
+  const std::string aligner = sharedModel("derived/aligner_upper_case0.stl.gz").string();
+  std::string reference;
+  for (const char* threads : {"1", "2", "4"}) {
+    const std::string out = std::string("held") + threads + ".sl1";
+    const RunResult r =
+        run({"slice", aligner, "-H", "0.05", "--printer", "sl1", "--masks", out, "--threads", threads, "-q"});
+    ASSERT_EQ(r.code(), 0) << threads << ": " << r.describe();
+    const std::string sl1 = readBytes(path(out));
+    ASSERT_TRUE(contains(sl1.substr(0, 4096), "thumbnail/thumbnail400x400.png")) << threads;
+    if (reference.empty())
+      reference = sl1;
+    else
+      EXPECT_TRUE(sl1 == reference) << "--threads " << threads << ": SL1 differs from --threads 1";
+  }
+  expectNoTemporaries();
+}
+
 // A .vdb carries a UUID in its header; ours is derived from the content, so the file is the same bytes for
 // every thread count and band size, and another content gets another UUID.
 TEST_F(CliToolDeterminism, VdbIsByteIdenticalForEveryThreadCountAndBandSize) {

@@ -4,6 +4,7 @@
 
 #include <atomic>
 #include <stdexcept>
+#include <thread>
 #include <vector>
 
 #include "parallel/parallel.h"
@@ -39,6 +40,23 @@ TEST(BackgroundTask, RethrowsItsExceptionOnceAndTheDestructorWaits) {
   {
     BackgroundTask dropped([] { throw std::runtime_error("never waited for"); });
   }  // no throw
+}
+
+// done() never blocks nor runs the work; it turns true once the work has ended, and after wait().
+TEST(BackgroundTask, DoneTellsWithoutWaiting) {
+  for (const unsigned threads : {1u, 2u}) {
+    ThreadLimit limit(threads);
+    std::atomic<bool> release{false};
+    BackgroundTask task([&] {
+      while (!release.load()) std::this_thread::yield();
+    });
+    EXPECT_FALSE(task.done()) << threads;  // the work cannot end before it is released
+    release = true;
+    if (threads > 1)
+      while (!task.done()) std::this_thread::yield();  // a free thread runs it and it ends
+    task.wait();
+    EXPECT_TRUE(task.done()) << threads;
+  }
 }
 
 // A pipeline's in-order stage waits for the task (as the slice job's first layer waits for the SL1

@@ -675,10 +675,27 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
   };
   parallelInvoke(topology, setUpOutputs);
-  // Deferred previews (the SL1 thumbnails) are drawn as a task beside the bands; the first layer's
-  // write waits for them, so the archive holds them first, as when drawn before.
+  // Deferred previews (the SL1 thumbnails) are drawn as a task beside the bands; the archive holds them
+  // first, as when drawn before. While the task draws, the in-order stage sets the encoded layers aside
+  // (moved out of their slots, up to kHeldBytes) instead of waiting for it, so no thread idles there;
+  // they are written, in order, once it is done. On one thread nothing else could draw them: the first
+  // layer waits (and so draws them) at once.
   std::optional<BackgroundTask> previews;
   if (maskSink) previews.emplace([&maskSink] { maskSink->drawPreviews(); });
+  struct HeldLayer {
+    uint32_t k;
+    EncodedMaskLayer encoded;
+  };
+  constexpr std::size_t kHeldBytes = std::size_t{64} << 20;
+  std::vector<HeldLayer> held;
+  std::size_t heldBytes = 0;
+  const bool holdLayers = ThreadLimit::available() > 1;
+  const auto writeHeldLayers = [&] {
+    if (previews) previews->wait();
+    for (HeldLayer& h : held) maskSink->writeEncodedLayer(h.k, planes[h.k], h.encoded);
+    held.clear();
+    heldBytes = 0;
+  };
 
   std::vector<SliceMesh> meshes{{soup.corners, adjacency}};
   for (std::size_t i = 0; i < features.size(); ++i) meshes.push_back({features[i].corners, featureTables[i]});
@@ -768,7 +785,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   };
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
                        uint32_t position) {
-    const LayerResult& r = slots[slot].layers[position];
+    LayerResult& r = slots[slot].layers[position];
     if (correcting) layer = r.corrected;
     for (std::size_t i = 0, e = 0; i < sinks.size(); ++i) {
       if (sinks[i]->encodesLayers())
@@ -777,8 +794,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
         sinks[i]->writeLayer(k, layer);
     }
     if (maskSink) {
-      if (previews) previews->wait();
-      maskSink->writeEncodedLayer(k, planes[k], r.encoded);
+      if (holdLayers && previews && !previews->done() && heldBytes + r.encoded.bytes.size() <= kHeldBytes) {
+        heldBytes += r.encoded.bytes.size();
+        held.push_back({k, std::move(r.encoded)});  // the slot's next encodeLayer allocates anew
+      } else {
+        writeHeldLayers();
+        maskSink->writeEncodedLayer(k, planes[k], r.encoded);
+      }
     }
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
     volumeMm3 += r.area * layerThickness(planes, k, options.planes);
@@ -805,7 +827,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
                           : " (the contours enclose no area on the pixel grid)"));
   for (auto& sink : sinks) sink->finish();
   if (maskSink) {
-    if (previews) previews->wait();
+    writeHeldLayers();
     maskJob.volumeMl = result.volumeMl;
     maskSink->finish(maskJob);
   }
