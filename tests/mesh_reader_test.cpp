@@ -13,12 +13,16 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <iterator>
+#include <limits>
 #include <string>
 #include <vector>
 
 #include "core/mesh/mesh_info.h"
 #include "io/errors.h"
 #include "io/readers/lib3mf_handle.h"
+#include "io/readers/ply_reader.h"
 #include "io/readers/stl_reader.h"
 #include "tests/fixtures/scratch_dir.h"
 
@@ -30,6 +34,10 @@ using Bytes = std::vector<std::byte>;
 
 fs::path modelsDir() {
   return fs::path(TOPOSLICE_MODELS_DIR);
+}
+
+bool haveModels() {
+  return fs::is_directory(modelsDir());
 }
 
 Bytes bytesOf(std::string_view text) {
@@ -245,6 +253,179 @@ TEST(MeshReader, PlyErrorsNameTheFaceVertexOrHeaderLine) {
   EXPECT_EQ(errorOf([&] { parseMesh(cut, "c.ply"); }), "c.ply: truncated: the data ends inside face 5");
 }
 
+// A runner that calls the chunks last first, as if four threads took them in any order: the fixed-record
+// PLY reader must give the same soup as the serial runner.
+const ChunkRunner& backwardsRunner() {
+  static const ChunkRunner runner{[](std::size_t count, std::size_t, const ChunkBody& body) {
+                                    for (std::size_t c = count; c-- > 0;) body(c, c + 1);
+                                  },
+                                  4};
+  return runner;
+}
+
+// A binary PLY of `faces` random triangles over `vertices` points (a fixed seed), with what scanners and
+// VTK add: a fixed-size element before the vertices, x as double, normals and a colour, a face flag.
+// `faceAt` may change a face's count or corners (count, corners), and `header` the element lines.
+struct RandomPly {
+  std::size_t vertices = 40000, faces = 70000;
+  bool bigEndian = false;
+  std::string countType = "uchar", indexType = "int";
+  std::function<void(std::size_t, int&, std::vector<int64_t>&)> faceAt;
+  std::function<float(std::size_t, int)> coordinate;
+
+  Bytes bytes() const {
+    std::string header = std::string("ply\nformat ") +
+                         (bigEndian ? "binary_big_endian" : "binary_little_endian") +
+                         " 1.0\nelement camera 1\nproperty float focal\nproperty int16 id\n"
+                         "element vertex " +
+                         std::to_string(vertices) +
+                         "\nproperty double x\nproperty float y\nproperty float z\nproperty float nx\n"
+                         "property uchar red\nelement face " +
+                         std::to_string(faces) + "\nproperty uchar flags\nproperty list " + countType + " " +
+                         indexType + " vertex_indices\nend_header\n";
+    Bytes out = bytesOf(header);
+    put<float>(out, 35.0f, bigEndian);
+    put<int16_t>(out, 3, bigEndian);
+    uint64_t state = 12345;
+    const auto next = [&] {
+      state = state * 6364136223846793005ull + 1442695040888963407ull;
+      return static_cast<int64_t>(state >> 33);
+    };
+    for (std::size_t v = 0; v < vertices; ++v) {
+      float xyz[3];
+      for (int k = 0; k < 3; ++k)
+        xyz[k] = coordinate ? coordinate(v, k) : static_cast<float>(next() % 100000) * 0.001f - 50.0f;
+      put<double>(out, xyz[0], bigEndian);
+      put<float>(out, xyz[1], bigEndian);
+      put<float>(out, xyz[2], bigEndian);
+      put<float>(out, 0.25f, bigEndian);
+      put<uint8_t>(out, 9, bigEndian);
+    }
+    const auto putTyped = [&](const std::string& type, int64_t value) {
+      if (type == "uchar") put<uint8_t>(out, static_cast<uint8_t>(value), bigEndian);
+      if (type == "ushort") put<uint16_t>(out, static_cast<uint16_t>(value), bigEndian);
+      if (type == "int") put<int32_t>(out, static_cast<int32_t>(value), bigEndian);
+      if (type == "uint") put<uint32_t>(out, static_cast<uint32_t>(value), bigEndian);
+    };
+    std::vector<int64_t> corners;
+    for (std::size_t f = 0; f < faces; ++f) {
+      int count = 3;
+      const auto n = static_cast<int64_t>(vertices);
+      corners = {next() % n, next() % n, next() % n};
+      if (faceAt) faceAt(f, count, corners);
+      put<uint8_t>(out, 1, bigEndian);
+      putTyped(countType, count);
+      for (const int64_t c : corners) putTyped(indexType, c);
+    }
+    return out;
+  }
+};
+
+bool sameCorners(const FacetSoup& a, const FacetSoup& b) {
+  return a.corners.size() == b.corners.size() &&
+         std::memcmp(a.corners.data(), b.corners.data(), a.corners.size() * sizeof(Point3f)) == 0;
+}
+
+// The fixed-record reader (chunks on a runner) gives the record-by-record soup, bit for bit, in both byte
+// orders and with other count and index types; the shared VTK PLYs too.
+TEST(MeshReader, BinaryPlyInChunksIsTheRecordByRecordSoup) {
+  for (const bool bigEndian : {false, true}) {
+    for (const auto& [countType, indexType] : std::vector<std::pair<std::string, std::string>>{
+             {"uchar", "int"}, {"uint", "uint"}, {"uchar", "ushort"}}) {
+      SCOPED_TRACE(std::string(bigEndian ? "big" : "little") + " " + countType + " " + indexType);
+      RandomPly ply;
+      ply.bigEndian = bigEndian;
+      ply.countType = countType;
+      ply.indexType = indexType;
+      if (indexType == "ushort") ply.vertices = 60000;
+      const Bytes bytes = ply.bytes();
+      PlySource fixed, records;
+      const FacetSoup a = parsePly(bytes, "r.ply", &fixed, backwardsRunner());
+      const FacetSoup b = parsePly(bytes, "r.ply");
+      const FacetSoup c = parsePlyRecords(bytes, "r.ply", &records);
+      ASSERT_EQ(a.facetCount(), ply.faces);
+      EXPECT_TRUE(sameCorners(a, c));
+      EXPECT_TRUE(sameCorners(b, c));
+      EXPECT_TRUE(fixed.binary && records.binary);
+      EXPECT_EQ(fixed.polygonsTriangulated, 0u);
+    }
+  }
+  if (!haveModels()) return;
+  int compared = 0;
+  for (const auto& entry : fs::directory_iterator(modelsDir())) {
+    if (entry.path().extension() != ".ply") continue;
+    SCOPED_TRACE(entry.path().filename().string());
+    std::ifstream in(entry.path(), std::ios::binary);
+    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const Bytes bytes = bytesOf(text);
+    EXPECT_TRUE(
+        sameCorners(parsePly(bytes, "m.ply", nullptr, backwardsRunner()), parsePlyRecords(bytes, "m.ply")));
+    ++compared;
+  }
+  EXPECT_GE(compared, 6);
+}
+
+// Whatever the fixed records cannot hold is read record by record: a polygon is fanned out, and damage
+// in any chunk gives the record-by-record message.
+TEST(MeshReader, BinaryPlyInChunksLeavesPolygonsAndDamageToTheRecordReader) {
+  const auto both = [](const RandomPly& ply, PlySource* source = nullptr) {
+    const Bytes bytes = ply.bytes();
+    std::string fixedError, recordError;
+    FacetSoup a, b;
+    try {
+      a = parsePly(bytes, "d.ply", source, backwardsRunner());
+    } catch (const InputError& e) {
+      fixedError = e.what();
+    }
+    try {
+      b = parsePlyRecords(bytes, "d.ply");
+    } catch (const InputError& e) {
+      recordError = e.what();
+    }
+    EXPECT_EQ(fixedError, recordError);
+    EXPECT_TRUE(sameCorners(a, b));
+    return fixedError;
+  };
+  RandomPly quad;
+  quad.faceAt = [](std::size_t f, int& count, std::vector<int64_t>& c) {
+    if (f == 69999) count = 4, c.push_back(7);
+  };
+  PlySource source;
+  EXPECT_EQ(both(quad, &source), "");
+  EXPECT_EQ(source.polygonsTriangulated, 1u);
+  RandomPly outside;
+  outside.faceAt = [](std::size_t f, int&, std::vector<int64_t>& c) {
+    if (f == 65600) c[1] = 40000;
+  };
+  EXPECT_EQ(both(outside), "d.ply: face 65600: vertex index 40000 out of range (40000 vertices)");
+  RandomPly negative;
+  negative.faceAt = [](std::size_t f, int&, std::vector<int64_t>& c) {
+    if (f == 3) c[2] = -1;
+  };
+  EXPECT_EQ(both(negative), "d.ply: face 3: vertex index -1 out of range (40000 vertices)");
+  RandomPly twoCorners;
+  twoCorners.faceAt = [](std::size_t f, int& count, std::vector<int64_t>& c) {
+    if (f == 40000) count = 2, c.pop_back();
+  };
+  EXPECT_EQ(both(twoCorners), "d.ply: face 40000: 2 corners, expected at least 3");
+  RandomPly notFinite;
+  notFinite.coordinate = [](std::size_t v, int k) {
+    return v == 39000 && k == 2 ? std::numeric_limits<float>::infinity() : static_cast<float>(v % 97);
+  };
+  EXPECT_EQ(both(notFinite), "d.ply: vertex 39000: non-finite coordinate (NaN or infinity)");
+  RandomPly shortFaces;
+  shortFaces.faces = 10;
+  Bytes cut = shortFaces.bytes();
+  cut.resize(cut.size() - 3);
+  std::string fixedError, recordError;
+  try {
+    parsePly(cut, "t.ply", nullptr, backwardsRunner());
+  } catch (const InputError& e) {
+    fixedError = e.what();
+  }
+  EXPECT_EQ(fixedError, "t.ply: truncated: the data ends inside face 9");
+}
+
 TEST(MeshReader, ObjCubeWithQuadsNegativeIndicesAndNormals) {
   MeshSource source;
   const FacetSoup soup = parseMesh(bytesOf(objCube()), "cube.obj", {}, &source);
@@ -436,10 +617,6 @@ TEST(MeshReader, UnitsAndScaleMultiplyCoordinates) {
 }
 
 // ---- Shared models ----------------------------------------------------------------------------------
-
-bool haveModels() {
-  return fs::is_directory(modelsDir());
-}
 
 // Facet i of `a` and of `b` have the same corners within `tolerance` (relative to the model's size).
 bool sameMesh(const FacetSoup& a, const FacetSoup& b, double tolerance) {

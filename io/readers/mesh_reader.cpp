@@ -141,7 +141,7 @@ FacetSoup parseInflated(std::span<const std::byte> bytes, const std::string& nam
     case Detected::kPly: {
       source.format = MeshFormat::Ply;
       PlySource ply;
-      soup = parsePly(bytes, name, &ply);
+      soup = parsePly(bytes, name, &ply, options.runner);
       source.binary = ply.binary;
       source.polygonsTriangulated = ply.polygonsTriangulated;
       break;

@@ -202,6 +202,48 @@ const Property* findProperty(const Element& element, std::string_view name) {
 }
 
 // ---------------------------------------------------------------------------------------------------
+// Binary scalars: `size` bytes at p in the file's byte order as one bit pattern, and that pattern as the
+// scalar type's value.
+
+uint64_t loadBits(const std::byte* p, std::size_t size, bool bigEndian) {
+  uint64_t v = 0;
+  for (std::size_t i = 0; i < size; ++i)
+    v = (v << 8) | std::to_integer<uint64_t>(p[bigEndian ? i : size - 1 - i]);
+  return v;
+}
+
+int64_t integerOfBits(uint64_t bits, Scalar t) {
+  switch (t) {
+    case Scalar::kInt8:
+      return static_cast<int8_t>(bits);
+    case Scalar::kInt16:
+      return static_cast<int16_t>(bits);
+    case Scalar::kInt32:
+      return static_cast<int32_t>(bits);
+    default:
+      return static_cast<int64_t>(bits);  // unsigned types, zero-extended
+  }
+}
+
+double realOfBits(uint64_t bits, Scalar t) {
+  switch (t) {
+    case Scalar::kFloat32: {
+      const auto narrow = static_cast<uint32_t>(bits);
+      float f;
+      std::memcpy(&f, &narrow, 4);
+      return f;
+    }
+    case Scalar::kFloat64: {
+      double d;
+      std::memcpy(&d, &bits, 8);
+      return d;
+    }
+    default:
+      return static_cast<double>(integerOfBits(bits, t));
+  }
+}
+
+// ---------------------------------------------------------------------------------------------------
 // Data cursors: the same interface over binary records and ASCII tokens.
 
 // The record being read, named in errors ("vertex 12", "face 3", "edge 0"); built only on failure.
@@ -220,25 +262,8 @@ class BinaryCursor {
   uint64_t roomFor(std::size_t bytes) const { return bytes == 0 ? UINT64_MAX : left() / bytes; }
   std::size_t left() const { return static_cast<std::size_t>(end_ - p_); }
 
-  double real(Scalar t, const Item& item) {
-    const uint64_t bits = take(t, item);
-    switch (t) {
-      case Scalar::kFloat32: {
-        const auto narrow = static_cast<uint32_t>(bits);
-        float f;
-        std::memcpy(&f, &narrow, 4);
-        return f;
-      }
-      case Scalar::kFloat64: {
-        double d;
-        std::memcpy(&d, &bits, 8);
-        return d;
-      }
-      default:
-        return static_cast<double>(integerOf(bits, t));
-    }
-  }
-  int64_t integer(Scalar t, const Item& item) { return integerOf(take(t, item), t); }
+  double real(Scalar t, const Item& item) { return realOfBits(take(t, item), t); }
+  int64_t integer(Scalar t, const Item& item) { return integerOfBits(take(t, item), t); }
   void skip(Scalar t, const Item& item) { take(t, item); }
   void skipItems(Scalar t, uint64_t count, const Item& item) {
     if (count > roomFor(sizeOf(t))) truncated(item);
@@ -247,26 +272,10 @@ class BinaryCursor {
   std::string where() const { return ""; }
 
  private:
-  static int64_t integerOf(uint64_t bits, Scalar t) {
-    switch (t) {
-      case Scalar::kInt8:
-        return static_cast<int8_t>(bits);
-      case Scalar::kInt16:
-        return static_cast<int16_t>(bits);
-      case Scalar::kInt32:
-        return static_cast<int32_t>(bits);
-      default:
-        return static_cast<int64_t>(bits);  // unsigned types, zero-extended
-    }
-  }
-
   uint64_t take(Scalar t, const Item& item) {
     const std::size_t size = sizeOf(t);
     if (left() < size) truncated(item);
-    uint64_t v = 0;
-    for (std::size_t i = 0; i < size; ++i) {
-      v = (v << 8) | std::to_integer<uint64_t>(p_[bigEndian_ ? i : size - 1 - i]);
-    }
+    const uint64_t v = loadBits(p_, size, bigEndian_);
     p_ += size;
     return v;
   }
@@ -481,6 +490,103 @@ class PlyParser {
     }
   }
 
+  // A field of a fixed-size record: its byte offset in the record and its type.
+  struct Field {
+    std::size_t offset = 0;
+    Scalar type = Scalar::kUint8;
+  };
+
+ public:
+  // The common binary file, read in chunks on `runner`: every element's records have one size (no list
+  // property but the faces' corners, and every face a triangle). Returns false, having changed nothing
+  // the caller keeps, for anything else -- another layout, a polygon, an index out of range, a
+  // coordinate that is not finite or beyond float, data too short -- and the caller then reads record by
+  // record (read()), which gives that path's result or its error message. Where it returns true, the
+  // soup is the one read() gives.
+  bool readFixed(std::span<const std::byte> data, bool bigEndian, FacetSoup& soup,
+                 const ChunkRunner& runner) {
+    if (!vertexElement_ || !faceElement_ || faceElement_->count == 0) return false;
+    std::size_t vertexStart = 0, vertexRecord = 0, faceStart = 0, faceRecord = 0, at = 0;
+    Field axes[3], count, corner;
+    for (const Element& e : header_.elements) {
+      if (e.count == 0 || e.properties.empty()) continue;  // nothing to read, as read() does
+      std::size_t record = 0;
+      for (const Property& p : e.properties) {
+        if (&e == vertexElement_) {
+          for (int k = 0; k < 3; ++k)
+            if (&p == axis_[k]) axes[k] = {record, p.type};
+        }
+        if (p.list && &p != cornerList_) return false;  // records of several sizes
+        if (&p == cornerList_) {
+          count = {record, p.countType};
+          corner = {record + sizeOf(p.countType), p.type};
+          record += sizeOf(p.countType) + 3 * sizeOf(p.type);
+        } else {
+          record += sizeOf(p.type);
+        }
+      }
+      if (e.count > (data.size() - at) / record) return false;  // read() names the truncation
+      if (&e == vertexElement_) vertexStart = at, vertexRecord = record;
+      if (&e == faceElement_) faceStart = at, faceRecord = record;
+      at += static_cast<std::size_t>(e.count) * record;
+    }
+    const std::size_t vertices = static_cast<std::size_t>(vertexElement_->count),
+                      faces = static_cast<std::size_t>(faceElement_->count);
+    constexpr std::size_t kChunk = std::size_t{1} << 15;  // records
+    const auto chunks = [](std::size_t n) { return (n + kChunk - 1) / kChunk; };
+    const std::byte* const bytes = data.data();
+
+    std::vector<Point3f> points(vertices);
+    std::vector<uint8_t> pointsBad(chunks(vertices), 0);
+    runner.run(pointsBad.size(), 1, [&](std::size_t c0, std::size_t c1) {
+      for (std::size_t c = c0; c < c1; ++c) {
+        const std::size_t end = std::min(vertices, (c + 1) * kChunk);
+        for (std::size_t v = c * kChunk; v < end; ++v) {
+          const std::byte* record = bytes + vertexStart + v * vertexRecord;
+          float xyz[3];
+          for (int k = 0; k < 3; ++k) {
+            const double value =
+                realOfBits(loadBits(record + axes[k].offset, sizeOf(axes[k].type), bigEndian), axes[k].type);
+            pointsBad[c] |= !std::isfinite(value) || std::abs(value) > std::numeric_limits<float>::max();
+            xyz[k] = static_cast<float>(value);
+          }
+          points[v] = {xyz[0], xyz[1], xyz[2]};
+        }
+      }
+    });
+    if (std::find(pointsBad.begin(), pointsBad.end(), 1) != pointsBad.end()) return false;
+
+    std::vector<Point3f> corners(3 * faces);
+    std::vector<uint8_t> facesBad(chunks(faces), 0);
+    const std::size_t cornerSize = sizeOf(corner.type);
+    runner.run(facesBad.size(), 1, [&](std::size_t c0, std::size_t c1) {
+      for (std::size_t c = c0; c < c1; ++c) {
+        const std::size_t end = std::min(faces, (c + 1) * kChunk);
+        for (std::size_t f = c * kChunk; f < end && !facesBad[c]; ++f) {
+          const std::byte* record = bytes + faceStart + f * faceRecord;
+          if (integerOfBits(loadBits(record + count.offset, sizeOf(count.type), bigEndian), count.type) !=
+              3) {
+            facesBad[c] = 1;  // a polygon (or a bad count): read() fans it out or names it
+            break;
+          }
+          for (std::size_t j = 0; j < 3; ++j) {
+            const int64_t index = integerOfBits(
+                loadBits(record + corner.offset + j * cornerSize, cornerSize, bigEndian), corner.type);
+            if (index < 0 || static_cast<uint64_t>(index) >= vertices) {
+              facesBad[c] = 1;
+              break;
+            }
+            corners[3 * f + j] = points[static_cast<std::size_t>(index)];
+          }
+        }
+      }
+    });
+    if (std::find(facesBad.begin(), facesBad.end(), 1) != facesBad.end()) return false;
+    soup.corners = std::move(corners);
+    return true;
+  }
+
+ private:
   [[noreturn]] void headerFail(const Element& e, const std::string& what) const {
     throwInputError(name_, "PLY header line " + std::to_string(e.line) + ": " + what);
   }
@@ -498,7 +604,26 @@ class PlyParser {
 
 }  // namespace
 
-FacetSoup parsePly(std::span<const std::byte> bytes, const std::string& name, PlySource* source) {
+FacetSoup parsePly(std::span<const std::byte> bytes, const std::string& name, PlySource* source,
+                   const ChunkRunner& runner) {
+  PlySource local;
+  PlySource& out = source ? *source : local;
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  const Header header = parseHeader(text, name);
+  if (header.encoding != Encoding::kAscii) {
+    PlyParser parser(header, name);
+    FacetSoup soup;
+    if (parser.readFixed(bytes.subspan(header.dataOffset), header.encoding == Encoding::kBinaryBig, soup,
+                         runner)) {
+      out = PlySource{};
+      out.binary = true;
+      return soup;
+    }
+  }
+  return parsePlyRecords(bytes, name, source);
+}
+
+FacetSoup parsePlyRecords(std::span<const std::byte> bytes, const std::string& name, PlySource* source) {
   PlySource local;
   PlySource& out = source ? *source : local;
   out = PlySource{};

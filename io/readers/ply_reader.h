@@ -31,6 +31,7 @@
 #include <span>
 #include <string>
 
+#include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 
 namespace toposlice {
@@ -40,7 +41,14 @@ struct PlySource {
   uint64_t polygonsTriangulated = 0;  // faces with more than 3 corners
 };
 
-// Parses PLY bytes; `name` starts every error message.
-FacetSoup parsePly(std::span<const std::byte> bytes, const std::string& name, PlySource* source = nullptr);
+// Parses PLY bytes; `name` starts every error message. The common binary file, whose records all have
+// one size (every face a triangle, no list property but the faces' corners), is converted in chunks on
+// `runner` (the result is the same for any runner); any other file, and any damage, is read record by
+// record (parsePlyRecords), which gives the same soup or names the problem.
+FacetSoup parsePly(std::span<const std::byte> bytes, const std::string& name, PlySource* source = nullptr,
+                   const ChunkRunner& runner = serialChunkRunner());
+// The record-by-record reader alone: every file the contract above admits (tests compare the two).
+FacetSoup parsePlyRecords(std::span<const std::byte> bytes, const std::string& name,
+                          PlySource* source = nullptr);
 
 }  // namespace toposlice
