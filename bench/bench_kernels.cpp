@@ -83,25 +83,38 @@ void BM_Adjacency(benchmark::State& state) {
 BENCHMARK(BM_Adjacency)->Unit(benchmark::kMillisecond);
 
 // The split forms (core/chunk_runner.h) on 1..N threads; Arg(1) is the split code on one thread.
+// The split forms on range(0) threads with a runner of width range(1): the weld splits from width 4
+// (2 x width partitions), the adjacency from width 2 (8 x width parts).
 void BM_WeldSplit(benchmark::State& state) {
   const Fixture& f = fixture();
   ThreadLimit limit(static_cast<unsigned>(state.range(0)));
   ChunkRunner runner = parallelChunkRunner();
-  runner.width = 2;  // the split form even on one thread
+  runner.width = static_cast<unsigned>(state.range(1));
   for (auto _ : state) benchmark::DoNotOptimize(weldCorners(f.soup.corners, runner).vertices.data());
 }
-BENCHMARK(BM_WeldSplit)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_WeldSplit)
+    ->Args({1, 4})
+    ->Args({2, 4})
+    ->Args({2, 16})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_AdjacencySplit(benchmark::State& state) {
   const Fixture& f = fixture();
   ThreadLimit limit(static_cast<unsigned>(state.range(0)));
   ChunkRunner runner = parallelChunkRunner();
-  runner.width = 2;
+  runner.width = static_cast<unsigned>(state.range(1));
   std::vector<int32_t> table(f.soup.corners.size());
   for (auto _ : state)
     benchmark::DoNotOptimize(buildAdjacency(f.mesh.facetVertices, f.mesh.vertices.size(), table, runner));
 }
-BENCHMARK(BM_AdjacencySplit)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_AdjacencySplit)
+    ->Args({1, 2})
+    ->Args({2, 2})
+    ->Args({2, 4})
+    ->Args({2, 16})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 void BM_FacetLayers(benchmark::State& state) {
   const Fixture& f = fixture();

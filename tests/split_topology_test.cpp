@@ -24,8 +24,9 @@ namespace toposlice {
 namespace {
 
 // Runs the chunks one at a time, but in the order given: last first, or odd chunks before even ones.
-// A kernel whose result depended on the chunk order would differ from its serial form here.
-ChunkRunner shuffledRunner(bool reverse) {
+// A kernel whose result depended on the chunk order would differ from its serial form here. `width`
+// sets how many pieces the kernels split into (the weld splits from 4, the adjacency from 2).
+ChunkRunner shuffledRunner(bool reverse, unsigned width = 4) {
   return ChunkRunner{[reverse](std::size_t count, std::size_t, const ChunkBody& body) {
                        std::vector<std::size_t> order(count);
                        for (std::size_t i = 0; i < count; ++i) order[i] = i;
@@ -36,7 +37,7 @@ ChunkRunner shuffledRunner(bool reverse) {
                                                [](std::size_t i) { return i % 2 == 1; });
                        for (const std::size_t c : order) body(c, c + 1);
                      },
-                     4};
+                     width};
 }
 
 struct Topology {
@@ -72,6 +73,8 @@ void checkModel(const FacetSoup& soup, const std::string& name) {
   const Topology serial = topologyOf(soup, serialChunkRunner());
   expectSame(serial, topologyOf(soup, shuffledRunner(true)), name + ", chunks last first");
   expectSame(serial, topologyOf(soup, shuffledRunner(false)), name + ", odd chunks first");
+  expectSame(serial, topologyOf(soup, shuffledRunner(true, 2)), name + ", width 2, chunks last first");
+  expectSame(serial, topologyOf(soup, shuffledRunner(false, 32)), name + ", width 32, odd chunks first");
   for (const unsigned threads : {2u, 3u, 8u}) {
     ThreadLimit limit(threads);
     expectSame(serial, topologyOf(soup, parallelChunkRunner()),
