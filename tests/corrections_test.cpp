@@ -641,6 +641,53 @@ TEST_F(CorrectionsCli, GrowingMasksAreTheSameWithOrWithoutContourOutputs) {
   }
 }
 
+// The elephant foot fades over faded_layers (10 by default: layers 0-8 shrink). Above it the correction
+// is nil, and those layers are the layers of the same job without it, byte for byte: masks (each layer's
+// PNG in the SL1), contours (each layer of the ASCII CLI) and the report's areas -- on a part alone and
+// on a plate.
+TEST_F(CorrectionsCli, LayersAboveTheElephantFootAreTheUncorrectedLayers) {
+  const auto cliLayers = [](const std::string& text) {
+    std::vector<std::string> layers;
+    for (std::size_t at = text.find("$$LAYER/"); at != std::string::npos;) {
+      const std::size_t next = text.find("$$LAYER/", at + 1);
+      layers.push_back(text.substr(at, next == std::string::npos ? std::string::npos : next - at));
+      at = next;
+    }
+    return layers;
+  };
+  std::vector<std::string> png[2], cli[2], report[2];
+  for (int foot = 0; foot < 2; ++foot) {
+    const std::string tag = foot ? "foot" : "plain";
+    std::vector<std::string> args{"slice",     examplePart().string(),
+                                  "-H",        "0.1",
+                                  "--printer", "sl1",
+                                  "--masks",   path(tag + ".sl1").string(),
+                                  "-o",        path(tag + ".cli").string(),
+                                  "--report",  path(tag + ".csv").string(),
+                                  "-q"};
+    if (foot) args.insert(args.end(), {"--elefant-foot-compensation", "0.2"});
+    const RunResult r = this->run(args);
+    ASSERT_EQ(r.code(), 0) << r.describe();
+    for (const std::string& name : tool_test::zipEntryNames(readBytes(path(tag + ".sl1"))))
+      if (name.ends_with(".png") && name.find("thumbnail") == std::string::npos)
+        png[foot].push_back(tool_test::zipEntry(path(tag + ".sl1"), name.c_str()));
+    cli[foot] = cliLayers(readBytes(path(tag + ".cli")));
+    std::istringstream lines(readBytes(path(tag + ".csv")));
+    for (std::string line; std::getline(lines, line);) report[foot].push_back(line);
+  }
+  ASSERT_EQ(png[0].size(), png[1].size());
+  ASSERT_GT(png[0].size(), 20u);
+  ASSERT_EQ(cli[0].size(), png[0].size());
+  ASSERT_EQ(report[0].size(), report[1].size());
+  EXPECT_NE(png[0][0], png[1][0]);  // the first layer shrinks
+  EXPECT_NE(cli[0][8], cli[1][8]);  // and the ninth, by a ninth of the foot
+  for (std::size_t k = 9; k < png[0].size(); ++k) {
+    EXPECT_TRUE(png[0][k] == png[1][k]) << "mask of layer " << k;
+    EXPECT_EQ(cli[0][k], cli[1][k]) << "contours of layer " << k;
+    EXPECT_EQ(report[0][k + 1], report[1][k + 1]) << "report row of layer " << k;  // after the header
+  }
+}
+
 TEST_F(CorrectionsCli, BadSettingsAreNamed) {
   const RunResult typo = this->run(
       {"slice", examplePart().string(), "-o", path("a.cli").string(), "--set", "absolute_corection=0.1"});

@@ -305,9 +305,11 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
     std::fill(r.partArea.begin(), r.partArea.end(), 0.0);
-    if (correcting) {
+    // A nil correction (above the elephant foot, no absolute correction): the sliced layer, moved.
+    const LayerCorrection correction =
+        correcting ? layerCorrection(print, k, planes.size()) : LayerCorrection{};
+    if (correction.any()) {
       // Each part corrected where it was sliced, then moved: the same loops as the part corrected alone.
-      const LayerCorrection correction = layerCorrection(print, k, planes.size());
       for (std::size_t m = 0; m < partCount; ++m) {
         const std::size_t first = partStart[m], end = m + 1 < partCount ? partStart[m + 1] : layer.size();
         s.sets.clear();
@@ -341,7 +343,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
       for (const double a : r.partArea) r.area += a;
       return;
     }
-    if (correcting) {
+    if (correction.any()) {
       s.sets.clear();
       for (std::size_t i = 0; i < layer.size(); ++i) {
         const std::size_t m = owner[i];

@@ -704,6 +704,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   struct LayerResult {
     EncodedMaskLayer encoded;              // the mask as the sink encoded it (a PNG, an EXR file, mask runs)
     std::vector<LayerContours> corrected;  // with corrections: the corrected layer, then empty features
+    bool correctedLayer = false;           // this layer's outputs are `corrected` (its correction is not nil)
     std::vector<TextBuffer> contourBytes;  // per contour sink that encodes its layers (CLI)
     double area = 0;
     uint64_t islands = 0;
@@ -735,10 +736,14 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     LayerResult& r = s.layers[position];
     std::span<const LayerContours> layer = sliced;
     bool raw = false;  // the masks rasterize s.rawLoops
-    if (correcting) {
+    // A layer whose correction is nil (above the elephant foot, with no absolute correction) is the
+    // sliced layer, as in a job without corrections, not a union of it.
+    const LayerCorrection correction =
+        correcting ? layerCorrection(print, k, planes.size()) : LayerCorrection{};
+    r.correctedLayer = correction.any();
+    if (r.correctedLayer) {
       // Absolute correction and elephant foot on the layer's solid region (model, add-ons and removals
       // under the positive rule): every output below and in consume sees the corrected layer.
-      const LayerCorrection correction = layerCorrection(print, k, planes.size());
       r.corrected.resize(sliced.size());
       s.sets.clear();
       for (std::size_t i = 0; i < sliced.size(); ++i)
@@ -786,7 +791,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   stages.consume = [&](uint32_t k, std::span<const LayerContours> layer, std::size_t slot,
                        uint32_t position) {
     LayerResult& r = slots[slot].layers[position];
-    if (correcting) layer = r.corrected;
+    if (r.correctedLayer) layer = r.corrected;
     for (std::size_t i = 0, e = 0; i < sinks.size(); ++i) {
       if (sinks[i]->encodesLayers())
         sinks[i]->writeEncodedLayer(k, r.contourBytes[e++]);
