@@ -56,14 +56,13 @@ Paths solidRegion(std::span<const ContourSet> sets, bool growOnly) {
   return clean;
 }
 
-Paths grow(const Paths& region, double mm);
-Paths shrink(const Paths& region, double mm);
+Paths trimmedOffset(const Paths& region, double mm);
 
 // Clean, oriented polygons grown by `mm` (shrunk when negative); Clipper unions the pieces.
 Paths offset(const Paths& region, double mm) {
   if (region.empty()) return {};
   if (mm == 0) return region;
-  return mm > 0 ? grow(region, mm) : shrink(region, mm);
+  return trimmedOffset(region, mm);
 }
 
 Paths combine(const Paths& a, const Paths& b, ClipperLib::ClipType type) {
@@ -375,7 +374,7 @@ class RawOffset {
       corner.edgeOut = std::sqrt(ax * ax + ay * ay);
       // 1 unit of slack for the rounding of b and a to whole units.
       const double reach =
-          std::max(std::max(corner.in, corner.out), delta_ * std::fabs(cross) / (len1 * len2)) + 1;
+          std::max(std::max(corner.in, corner.out), std::fabs(delta_ * cross) / (len1 * len2)) + 1;
       corner.ok = reach <= edgeIn && reach <= corner.edgeOut;
     }
     // Pass 2: two trimmed corners at the ends of one edge share it.
@@ -445,8 +444,13 @@ Paths unite(const Paths& loops) {
   return united;
 }
 
-// The region grown by `mm` > 0: the positive-winding union of its trimmed raw offset loops.
-Paths grow(const Paths& region, double mm) {
+// The region offset by `mm`: the positive-winding union of its trimmed raw offset loops. Growing
+// (mm > 0): docs/DESIGN.md, "Growing by trimmed raw loops". Shrinking (mm < 0) a clean region (a union's
+// polygons: count 0 or 1) is growing its complement, whose count 1 - count is never negative: the raw
+// loops for -d are those for +d of the reversed loops, reversed, and ClipperOffset's own shrink is the
+// region where their count is positive (the union under the negative rule with an outer box that it
+// makes). So the trims apply alike, at the convex corners, and the region is ClipperOffset's.
+Paths trimmedOffset(const Paths& region, double mm) {
   RawScratch& scratch = rawScratch();
   scratch.offset.reset(static_cast<double>(toUnits(mm)), kMiterLimit);
   for (const Path& path : region) scratch.add(path);
@@ -466,21 +470,6 @@ void appendLoop(const Path& loop, LayerContours& out) {
   out.endLoop(true);
 }
 
-// The region shrunk by -mm > 0: ClipperOffset, on the outline cleaned as grow cleans it. (Vertices
-// within kCleanMm of their neighbours' line go first: dense, nearly straight outlines of fine meshes
-// otherwise make the offset's self-intersection pass the slowest step by far.)
-Paths shrink(const Paths& region, double mm) {
-  LoopCleaner& cleaner = rawScratch().cleaner;
-  Paths cleaned(region.size());
-  for (std::size_t i = 0; i < region.size(); ++i)
-    cleaner.clean(region[i], kCleanMm * kOffsetUnitsPerMm, cleaned[i]);
-  ClipperLib::ClipperOffset offsetter(kMiterLimit);
-  offsetter.AddPaths(cleaned, ClipperLib::jtMiter, ClipperLib::etClosedPolygon);
-  Paths out;
-  offsetter.Execute(out, static_cast<double>(toUnits(mm)));
-  return out;
-}
-
 void writeLoops(const Paths& paths, double z, LayerContours& out) {
   out.clear(z);
   for (const Path& path : paths)
@@ -495,8 +484,18 @@ bool growsOnly(std::span<const ContourSet> sets, const LayerCorrection& correcti
 
 bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                        LayerContours& out) {
+  if (correction.absolute < 0 && !(correction.elephantFoot > 0)) {
+    // trimmedOffset(solidRegion(sets, false), absolute) before its last union: the same loops.
+    const Paths solid = solidRegion(sets, false);
+    RawScratch& scratch = rawScratch();
+    scratch.offset.reset(static_cast<double>(toUnits(correction.absolute)), kMiterLimit);
+    for (const Path& path : solid) scratch.add(path);
+    out.clear(z);
+    scratch.offset.build([&](const Path& loop) { appendLoop(loop, out); });
+    return true;
+  }
   if (!growsOnly(sets, correction)) return false;
-  // grow(solidRegion(sets, true), absolute) before its union, without the Paths: the same loops.
+  // trimmedOffset(solidRegion(sets, true), absolute) before its union, without the Paths: the same loops.
   RawScratch& scratch = rawScratch();
   scratch.offset.reset(static_cast<double>(toUnits(correction.absolute)), kMiterLimit);
   const LayerContours& layer = *sets[0].layer;

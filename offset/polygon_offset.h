@@ -17,15 +17,17 @@
 //   a pixel, and the offset of a dense mesh's outline costs about a third less.
 // - Corners use mitred joins with a miter limit of 3 (PrusaSlicer's default for offset_ex): a box grown
 //   by d stays a box, (a + 2d) x (b + 2d); corners sharper than about 39 degrees are squared off.
-// - Shrinking is ClipperOffset's (its raw offset loops, then their union). Growing builds the same raw
-//   loops (ClipperOffset's points, re-derived: outline cleaning, orientation fix, normals, joins and
-//   rounding to integer nanometres), but trims each concave corner where it fits: the detour through
-//   the corner is replaced by the crossing of its two moved edges (rounded to a nanometre), which
-//   leaves the positive-winding region as it was (docs/DESIGN.md, "Growing by trimmed raw loops").
-//   The union of loops that no longer cross at every concave corner costs a fraction of
-//   ClipperOffset's. The region is ClipperOffset's wherever the input's count is never negative (its
-//   points can differ where Clipper rounds a crossing of its own); where it is negative somewhere, the
-//   positive part grows alone, which ClipperOffset's detours did not give.
+// - Offsets use raw offset loops: ClipperOffset's points (re-derived: outline cleaning, orientation
+//   fix, normals, joins and rounding to integer nanometres), with each corner where the moved edges
+//   cross (a concave corner when growing, a convex one when shrinking) trimmed where it fits: the
+//   detour through the corner is replaced by the crossing of its two moved edges (rounded to a
+//   nanometre), which leaves the positive-winding region as it was (docs/DESIGN.md, "Growing by trimmed
+//   raw loops"; shrinking a clean region is growing its complement). The union of loops that no longer
+//   cross at every such corner costs a fraction of ClipperOffset's. The region is ClipperOffset's
+//   wherever the input's count is never negative (its points can differ where Clipper rounds a
+//   crossing of its own); where it is negative somewhere, the positive part grows alone, which
+//   ClipperOffset's detours did not give. A shrink starts from the union of the input, as
+//   ClipperOffset's needs, so its input is always clean.
 // - The output layer holds closed loops only; its `facets` entries are kCorrectedFacet (a corrected
 //   point lies on no single facet).
 #pragma once
@@ -59,12 +61,13 @@ struct LayerCorrection {
 std::size_t correctLayer(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                          LayerContours& out);
 
-// The corrected region as loops for a rasterizer, without the union that correctLayer's growth ends
-// with. Only when `correction` grows a single positive set (absolute > 0, no elephant foot; returns
-// false otherwise, `out` untouched): the trimmed raw offset loops (above), whose positive-winding union
-// (unitePositive) is exactly correctLayer's result, so masks of either are the same region. The
-// rasterizers apply the positive rule themselves, so binary masks need no union. Where a corner's detour
-// stays (its trims do not fit), the loop crosses itself there.
+// The corrected region as loops for a rasterizer, without the union that correctLayer's offset ends
+// with. Only when `correction` is an absolute correction alone (no elephant foot) that grows a single
+// positive set, or that shrinks any sets (returns false otherwise, `out` untouched): the trimmed raw
+// offset loops (above; of the sets' union when shrinking), whose positive-winding union (unitePositive)
+// is exactly correctLayer's result, so masks of either are the same region. The rasterizers apply the
+// positive rule themselves, so binary masks need no union. Where a corner's detour stays (its trims do
+// not fit), the loop crosses itself there.
 bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                        LayerContours& out);
 

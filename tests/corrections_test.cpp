@@ -191,7 +191,24 @@ LayerContours clipperGrown(const LayerContours& layer, double d) {
   return toLayer(out);
 }
 
-// The area, in mm^2, of the points in one of the two regions and not in the other.
+// The reference for shrinking: ClipperOffset's shrink of the region (Clipper's union first, as
+// correctLayer unites it), cleaned alike.
+LayerContours clipperShrunk(const LayerContours& layer, double d) {
+  ClipperLib::Paths united;
+  ClipperLib::Clipper clipper;
+  clipper.AddPaths(toPaths(layer), ClipperLib::ptSubject, true);
+  clipper.Execute(ClipperLib::ctUnion, united, ClipperLib::pftPositive, ClipperLib::pftPositive);
+  return clipperGrown(toLayer(united), -d);
+}
+
+// ClipperOffset's region for an absolute correction d of either sign.
+LayerContours clipperOffset(const LayerContours& layer, double d) {
+  return d > 0 ? clipperGrown(layer, d) : clipperShrunk(layer, -d);
+}
+
+// The area, in mm^2, of the points in one of the two regions and not in the other: the signed sum over
+// the XOR's polygons (outer loops positive, holes negative; where the two regions hold the same small
+// island, Clipper may return it as a loop and an equal hole, which cancel).
 double differenceArea(const LayerContours& a, const LayerContours& b) {
   ClipperLib::Clipper clipper;
   clipper.AddPaths(toPaths(a), ClipperLib::ptSubject, true);
@@ -199,8 +216,8 @@ double differenceArea(const LayerContours& a, const LayerContours& b) {
   ClipperLib::Paths out;
   clipper.Execute(ClipperLib::ctXor, out, ClipperLib::pftPositive, ClipperLib::pftPositive);
   double area = 0;
-  for (const ClipperLib::Path& p : out) area += std::fabs(ClipperLib::Area(p));
-  return area / (kOffsetUnitsPerMm * kOffsetUnitsPerMm);
+  for (const ClipperLib::Path& p : out) area += ClipperLib::Area(p);
+  return std::fabs(area) / (kOffsetUnitsPerMm * kOffsetUnitsPerMm);
 }
 
 double perimeter(const LayerContours& layer) {
@@ -222,28 +239,33 @@ double perimeter(const LayerContours& layer) {
 // which the right triangle's corners are trimmed too (it then shrinks exactly, and no point within d of
 // the left triangle lies in what is left of it). At 1.5 the right triangle vanishes (its inradius is
 // 0.41), its detours stay, and nothing is promised for a negative count.
-TEST(PolygonOffset, GrowingGivesClipperOffsetsRegion) {
+//
+// Shrinking (a negative d) starts from the union of the input, which is clean (count 0 or 1), and gives
+// ClipperOffset's shrink of that union, bow tie included (its union is the left triangle), down to
+// nothing where d exceeds a shape's inradius.
+TEST(PolygonOffset, GrowingOrShrinkingGivesClipperOffsetsRegion) {
   const std::vector<LayerContours> shapes = rawOffsetShapes();
   LayerContours leftOfBowTie;
   addLoop(leftOfBowTie, {{0, 0}, {1, 1}, {0, 2}});
   for (std::size_t s = 0; s < shapes.size(); ++s) {
-    for (const double d : {0.0005, 0.05, 0.3, 1.5}) {
+    for (const double d : {0.0005, 0.05, 0.3, 1.5, -0.0005, -0.05, -0.3, -1.5}) {
       if (s == 6 && d > 1) continue;
       const ContourSet set{&shapes[s], 1};
-      LayerContours grown;
-      correctLayer({&set, 1}, {d, 0, 0}, 0.0, grown);
-      const LayerContours reference = clipperGrown(s == 6 ? leftOfBowTie : shapes[s], d);
-      EXPECT_NEAR(layerSignedArea(grown), layerSignedArea(reference), 2e-6 * perimeter(reference));
-      EXPECT_LE(differenceArea(grown, reference), 2e-6 * perimeter(reference))
-          << "shape " << s << ", d " << d;
+      LayerContours offset;
+      correctLayer({&set, 1}, {d, 0, 0}, 0.0, offset);
+      const LayerContours reference = clipperOffset(s == 6 && d > 0 ? leftOfBowTie : shapes[s], d);
+      const double band = 2e-6 * std::max(perimeter(reference), 1e-3);
+      EXPECT_NEAR(layerSignedArea(offset), layerSignedArea(reference), band) << "shape " << s << ", d " << d;
+      EXPECT_LE(differenceArea(offset, reference), band) << "shape " << s << ", d " << d;
     }
   }
 }
 
 // Real layers: the aligner (dense, nearly straight outlines with many concave corners, overlapping
-// shells) and the femur, 40 layers each. The grown region is ClipperOffset's within a nanometre band,
-// and binary masks of the raw loops (what a masks-only job rasterizes) are those of Clipper's polygons.
-TEST(PolygonOffset, GrowingRealLayersGivesClipperOffsetsRegionAndMasks) {
+// shells) and the femur, 40 layers each. The grown or shrunk region is ClipperOffset's within a
+// nanometre band, and binary masks of the raw loops (what a masks-only job rasterizes) are those of
+// Clipper's polygons.
+TEST(PolygonOffset, GrowingOrShrinkingRealLayersGivesClipperOffsetsRegionAndMasks) {
   RasterScratch scratch;
   std::size_t pixelsCompared = 0, pixelsDiffering = 0, layersCompared = 0;
   for (const char* file : {"derived/aligner_upper_case0.stl.gz", "knee_femur_ssm_S001.stl"}) {
@@ -256,15 +278,15 @@ TEST(PolygonOffset, GrowingRealLayersGivesClipperOffsetsRegionAndMasks) {
     ASSERT_TRUE(error.empty()) << error;
     const std::vector<LayerContours> layers = fixtures::sliceToVector(soup, planes, SliceMethod::SelfReuse);
     const PixelGrid grid = fixtures::gridAround(box, 0.04725, 1, 0.013, 0.007);
-    for (const double d : {0.05, 0.2}) {
+    for (const double d : {0.05, 0.2, -0.05, -0.2}) {
       for (std::size_t k = 0; k < layers.size(); ++k) {
         if (layers[k].loopCount() == 0) continue;
         const ContourSet set{&layers[k], 1};
-        LayerContours grown, raw;
-        correctLayer({&set, 1}, {d, 0, 0}, 0.0, grown);
+        LayerContours offset, raw;
+        correctLayer({&set, 1}, {d, 0, 0}, 0.0, offset);
         ASSERT_TRUE(rawCorrectedLoops({&set, 1}, {d, 0, 0}, 0.0, raw));
-        const LayerContours reference = clipperGrown(layers[k], d);
-        EXPECT_LE(differenceArea(grown, reference), 2e-6 * perimeter(reference))
+        const LayerContours reference = clipperOffset(layers[k], d);
+        EXPECT_LE(differenceArea(offset, reference), 2e-6 * std::max(perimeter(reference), 1e-3))
             << file << " layer " << k << ", d " << d;
         const ContourSet a{&reference, 1}, b{&raw, 1};
         MaskImage ma, mb;
@@ -277,19 +299,20 @@ TEST(PolygonOffset, GrowingRealLayersGivesClipperOffsetsRegionAndMasks) {
       }
     }
   }
-  EXPECT_GT(layersCompared, 120u);
+  EXPECT_GT(layersCompared, 240u);
   // A pixel centre within a nanometre of the outline may fall either way: at most one in ten million.
   EXPECT_LE(pixelsDiffering * 10'000'000, pixelsCompared) << pixelsDiffering << " of " << pixelsCompared;
 }
 
 // Random outlines, 4,000 of them: stars of 5 to 84 points at random radii, half with a jitter point
-// beside every vertex (short edges, sharp concave corners, spikes, small self-crossings), grown by
-// 0.005 to 0.6. Wherever the count never goes negative, the region is ClipperOffset's. (With a
-// negative count somewhere, ClipperOffset itself is not the grown positive region: see the bow tie.)
-TEST(PolygonOffset, GrowingRandomOutlinesGivesClipperOffsetsRegion) {
+// beside every vertex (short edges, sharp concave corners, spikes, small self-crossings), grown and
+// shrunk by 0.005 to 0.6. Grown, wherever the count never goes negative, the region is
+// ClipperOffset's. (With a negative count somewhere, ClipperOffset itself is not the grown positive
+// region: see the bow tie.) Shrunk, it is ClipperOffset's shrink of the union, always.
+TEST(PolygonOffset, GrowingOrShrinkingRandomOutlinesGivesClipperOffsetsRegion) {
   std::mt19937 rng(1);
   std::uniform_real_distribution<double> uniform(0, 1);
-  std::size_t compared = 0;
+  std::size_t compared = 0, shrinks = 0;
   for (int trial = 0; trial < 4000; ++trial) {
     std::vector<Point2d> points;
     const int n = 5 + trial % 80;
@@ -305,6 +328,15 @@ TEST(PolygonOffset, GrowingRandomOutlinesGivesClipperOffsetsRegion) {
     LayerContours shape;
     addLoop(shape, points);
     const double d = 0.005 + (trial % 4 == 0 ? 0.6 : 0.1) * uniform(rng);
+    {
+      const ContourSet set{&shape, 1};
+      LayerContours shrunk;
+      correctLayer({&set, 1}, {-d, 0, 0}, 0.0, shrunk);
+      const LayerContours reference = clipperShrunk(shape, d);
+      ASSERT_LE(differenceArea(shrunk, reference), 2e-6 * std::max(perimeter(reference), 1e-3))
+          << "trial " << trial << ", shrunk by " << d;
+      ++shrinks;
+    }
     ClipperLib::Paths negative;
     ClipperLib::Clipper clipper;
     clipper.AddPaths(toPaths(shape), ClipperLib::ptSubject, true);
@@ -319,6 +351,7 @@ TEST(PolygonOffset, GrowingRandomOutlinesGivesClipperOffsetsRegion) {
     ++compared;
   }
   EXPECT_GT(compared, 2000u);
+  EXPECT_EQ(shrinks, 4000u);
 }
 
 // Concave corners are trimmed where their trims fit: an L grown by 0.1 is the grown L, six points, not
@@ -358,7 +391,7 @@ TEST(PolygonOffset, RawLoopsUniteToTheCorrectedLayerPointForPoint) {
   points.push_back({0, 5});
   addLoop(arc, points);
   for (std::size_t s = 0; s < shapes.size(); ++s) {
-    for (const double d : {0.0005, 0.05, 0.3, 1.5}) {
+    for (const double d : {0.0005, 0.05, 0.3, 1.5, -0.0005, -0.05, -0.3}) {
       const ContourSet set{&shapes[s], 1};
       LayerContours expected, raw, united;
       correctLayer({&set, 1}, {d, 0, 0}, 1.0, expected);
@@ -372,19 +405,27 @@ TEST(PolygonOffset, RawLoopsUniteToTheCorrectedLayerPointForPoint) {
   }
 }
 
-TEST(PolygonOffset, RawLoopsOnlyWhenTheOffsetOnlyGrows) {
+// Raw loops for an absolute correction alone: growing one positive set (growth distributes over the
+// union), or shrinking any sets (from their union). Not with an elephant foot, nor for growing sets
+// that a union would have to merge first.
+TEST(PolygonOffset, RawLoopsForAnAbsoluteCorrectionAlone) {
   LayerContours box, hole;
   addRect(box, 0, 0, 10, 6);
   addRect(hole, 4, 2, 6, 4);
   const ContourSet one{&box, 1}, removed[] = {{&box, 1}, {&hole, -1}}, added[] = {{&box, 1}, {&hole, 1}};
   LayerContours out;
-  EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {-0.05, 0, 0}, 0, out));     // shrinking needs the union first
-  EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {0.05, 0.1, 0.2}, 0, out));  // the elephant foot too
+  EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {0.05, 0.1, 0.2}, 0, out));   // the elephant foot
+  EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {-0.05, 0.1, 0.2}, 0, out));  // shrinking or not
   EXPECT_FALSE(rawCorrectedLoops({&one, 1}, {0, 0, 0}, 0, out));
   EXPECT_FALSE(rawCorrectedLoops(removed, {0.05, 0, 0}, 0, out));
   EXPECT_FALSE(rawCorrectedLoops(added, {0.05, 0, 0}, 0, out));
   EXPECT_EQ(out.loopCount(), 0u);
   EXPECT_TRUE(rawCorrectedLoops({&one, 1}, {0.05, 0, 0}, 0, out));
+  EXPECT_TRUE(rawCorrectedLoops({&one, 1}, {-0.05, 0, 0}, 0, out));
+  EXPECT_EQ(out.points.size(), 4u);  // the box's convex corners trimmed: no detour through them
+  // The box with its hole removed, shrunk: the frame 9.9 x 5.9 minus the hole grown to 2.1 x 2.1.
+  ASSERT_TRUE(rawCorrectedLoops(removed, {-0.05, 0, 0}, 0, out));
+  EXPECT_NEAR(layerSignedArea(out), 9.9 * 5.9 - 2.1 * 2.1, 1e-9);
 }
 
 TEST(PolygonOffset, RawLoopsRasterizeToTheOffsetsMasks) {
@@ -399,7 +440,7 @@ TEST(PolygonOffset, RawLoopsRasterizeToTheOffsetsMasks) {
   grid.height = 330;
   RasterScratch scratch;
   for (std::size_t s = 0; s < shapes.size(); ++s) {
-    for (const double d : {0.05, 0.3}) {
+    for (const double d : {0.05, 0.3, -0.05, -0.3}) {
       const ContourSet set{&shapes[s], 1};
       LayerContours polygons, raw;
       correctLayer({&set, 1}, {d, 0, 0}, 0.0, polygons);
@@ -409,7 +450,7 @@ TEST(PolygonOffset, RawLoopsRasterizeToTheOffsetsMasks) {
       uint64_t litA = 0, litB = 0;
       rasterizeBinary({&a, 1}, grid, ma, scratch, &litA);
       rasterizeBinary({&b, 1}, grid, mb, scratch, &litB);
-      EXPECT_GT(litA, 0u) << s;
+      EXPECT_TRUE(litA > 0 || d < 0) << s;  // a shrink may leave nothing of a small shape
       EXPECT_TRUE(ma.pixels == mb.pixels) << "binary, shape " << s << ", d " << d;
       rasterizeCoverage({&a, 1}, grid, ma, scratch);
       rasterizeCoverage({&b, 1}, grid, mb, scratch);
