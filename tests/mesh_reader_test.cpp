@@ -24,6 +24,7 @@
 #include "io/readers/lib3mf_handle.h"
 #include "io/readers/ply_reader.h"
 #include "io/readers/stl_reader.h"
+#include "tests/fixtures/gzip_bytes.h"
 #include "tests/fixtures/scratch_dir.h"
 
 namespace toposlice {
@@ -51,19 +52,7 @@ void writeFile(const fs::path& path, const Bytes& bytes) {
   out.write(reinterpret_cast<const char*>(bytes.data()), static_cast<std::streamsize>(bytes.size()));
 }
 
-Bytes gzipped(const Bytes& in) {
-  z_stream s{};
-  EXPECT_EQ(deflateInit2(&s, 6, Z_DEFLATED, 16 + MAX_WBITS, 8, Z_DEFAULT_STRATEGY), Z_OK);
-  Bytes out(deflateBound(&s, static_cast<uLong>(in.size())) + 32);
-  s.next_in = const_cast<Bytef*>(reinterpret_cast<const Bytef*>(in.data()));
-  s.avail_in = static_cast<uInt>(in.size());
-  s.next_out = reinterpret_cast<Bytef*>(out.data());
-  s.avail_out = static_cast<uInt>(out.size());
-  EXPECT_EQ(deflate(&s, Z_FINISH), Z_STREAM_END);
-  out.resize(s.total_out);
-  deflateEnd(&s);
-  return out;
-}
+using fixtures::gzipped;
 
 // The message of the InputError that `load` throws ("" when it loads, with a test failure).
 template <class F>

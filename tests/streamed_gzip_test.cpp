@@ -17,6 +17,7 @@
 #include "io/readers/byte_input.h"
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
+#include "tests/fixtures/gzip_bytes.h"
 #include "tests/fixtures/models.h"
 
 namespace toposlice {
@@ -29,20 +30,7 @@ Bytes fileBytes(const std::string& model) {
   return Bytes(file.data.get(), file.data.get() + file.size);
 }
 
-// zlib's gzip of `in` at `level`, as one member.
-Bytes gzipped(const Bytes& in, int level = 6) {
-  z_stream s{};
-  EXPECT_EQ(deflateInit2(&s, level, Z_DEFLATED, 16 + MAX_WBITS, 8, Z_DEFAULT_STRATEGY), Z_OK);
-  Bytes out(deflateBound(&s, static_cast<uLong>(in.size())) + 32);
-  s.next_in = const_cast<Bytef*>(reinterpret_cast<const Bytef*>(in.data()));
-  s.avail_in = static_cast<uInt>(in.size());
-  s.next_out = reinterpret_cast<Bytef*>(out.data());
-  s.avail_out = static_cast<uInt>(out.size());
-  EXPECT_EQ(deflate(&s, Z_FINISH), Z_STREAM_END);
-  out.resize(s.total_out);
-  deflateEnd(&s);
-  return out;
-}
+using fixtures::gzipped;
 
 Bytes gunzipped(const Bytes& gz) {
   const ByteBuffer whole = gunzip(gz, "t");
