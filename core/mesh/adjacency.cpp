@@ -15,8 +15,13 @@ struct BucketEntry {
 };
 constexpr uint32_t kTaken = 0xFFFFFFFFu;
 constexpr std::size_t kSplitFrom = std::size_t{1} << 17;  // half-edges; below, one part is faster
-// Parts per thread of a split: more, smaller parts keep each part's buckets in cache (the aligner,
-// BM_AdjacencySplit on 2 threads: 2 parts 14.5 ms, 16 parts 12.7 ms).
+// From this runner width on, the half-edges are first filed by part, 8 parts per thread (smaller parts
+// keep their buckets in cache); below it, each of `width` parts scans every facet, which costs less
+// for two parts but grows with their number (the aligner, BM_AdjacencySplit on 2 threads: 2 parts
+// scanning 14.4 ms, 8 parts 27.9 ms, 16 parts 45.5 ms; filed 12.2-12.7 ms for 16 to 128 parts; in the
+// slice job on 2 threads, where the set-up of the outputs runs beside it, scanning 0.021 s against
+// filed 0.027 s).
+constexpr unsigned kFileFromWidth = 4;
 constexpr std::size_t kPartsPerThread = 8, kMaxParts = 256;
 
 }  // namespace
@@ -26,14 +31,15 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
   assert(adjacency.size() == facetVertices.size());
   const std::size_t halfEdges = facetVertices.size(), facets = halfEdges / 3;
   // The vertices are split into `parts` equal ranges, and each part owns the buckets of its range: it
-  // counts, files and matches only the half-edges whose lower vertex it owns, which chunks of facets
-  // have first filed by part (so no part scans every facet; scanning them all per part cost 2.6 times
-  // the serial work with 8 parts, 5.4 times with 16). No two parts write the same word, and a bucket
-  // lists its half-edges in index order whatever the split, so the table and the counts are the same
-  // for any runner.
-  const std::size_t parts = runner.width > 1 && halfEdges >= kSplitFrom
-                                ? std::min<std::size_t>(kPartsPerThread * runner.width, kMaxParts)
-                                : 1;
+  // counts, files and matches only the half-edges whose lower vertex it owns. From kFileFromWidth on,
+  // chunks of facets first file the half-edges by part, so that no part scans every facet; below it,
+  // each part scans them all. No two parts write the same word, and a bucket lists its half-edges in
+  // index order whatever the split, so the table and the counts are the same for any runner.
+  const bool split = runner.width > 1 && halfEdges >= kSplitFrom;
+  const bool filed = split && runner.width >= kFileFromWidth;
+  const std::size_t parts = !split  ? 1
+                            : filed ? std::min<std::size_t>(kPartsPerThread * runner.width, kMaxParts)
+                                    : runner.width;
   const ChunkRunner& run = parts > 1 ? runner : serialChunkRunner();
   const std::size_t partVertices = (vertexCount + parts - 1) / std::max<std::size_t>(parts, 1);
   auto degenerate = [](const uint32_t* v) { return v[0] == v[1] || v[1] == v[2] || v[0] == v[2]; };
@@ -57,7 +63,6 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
   constexpr std::size_t kFacetChunk = std::size_t{1} << 15;
   const std::size_t facetChunks = (facets + kFacetChunk - 1) / kFacetChunk;
   std::vector<uint64_t> degenerateFacets(facetChunks, 0);
-  const bool filed = parts > 1;
   std::vector<std::size_t> chunkPartAt(filed ? facetChunks * parts : 0, 0);  // counts, then positions
   auto chunkEnd = [&](std::size_t c) { return std::min(facets, (c + 1) * kFacetChunk); };
   run.run(facetChunks, 1, [&](std::size_t c0, std::size_t c1) {
@@ -101,7 +106,12 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
   }
   // Calls visit(h, lower, upper) for every half-edge whose lower vertex part p owns, in half-edge order.
   auto forOwned = [&](std::size_t p, auto&& visit) {
-    if (!filed) return forHalfEdges(0, facets, visit);  // one part: every half-edge
+    if (!filed) {
+      const std::size_t v0 = p * partVertices, v1 = (p + 1) * partVertices;
+      return forHalfEdges(0, facets, [&](std::size_t h, uint32_t lower, uint32_t upper) {
+        if (lower >= v0 && lower < v1) visit(h, lower, upper);
+      });
+    }
     for (std::size_t i = partBegin[p]; i < partBegin[p + 1]; ++i)
       visit(owned[i].half, owned[i].lower, owned[i].upper);
   };
