@@ -385,23 +385,28 @@ TEST_F(CliToolDeterminism, AntiAliasedSl1IsByteIdenticalForEveryThreadCountAndBa
   expectNoTemporaries();
 }
 
-// The aligner's 545k facets take far longer to draw as SL1 thumbnails than its first layers take to
-// slice: on more than one thread the first layers are set aside until the thumbnails are in the archive
-// (slice_job.cpp, "Deferred previews"). The archive is still the one-thread archive, byte for byte.
-TEST_F(CliToolDeterminism, Sl1WithLayersHeldForTheThumbnailsIsTheOneThreadArchive) {
+// The aligner's 545k facets take far longer to draw as the printer files' previews than its first
+// layers take to slice: on more than one thread they are drawn beside the bands, the first SL1 layers
+// set aside until the thumbnails are in the archive, the GOO and NanoDLP previews stored at finish
+// (slice_job.cpp, "Deferred previews"). Each file is still the one-thread file, byte for byte.
+TEST_F(CliToolDeterminism, PrinterFilesWithPreviewsDrawnBesideTheLayersAreTheOneThreadFiles) {
   const std::string aligner = sharedModel("derived/aligner_upper_case0.stl.gz").string();
-  std::string reference;
-  for (const char* threads : {"1", "2", "4"}) {
-    const std::string out = std::string("held") + threads + ".sl1";
-    const RunResult r =
-        run({"slice", aligner, "-H", "0.05", "--printer", "sl1", "--masks", out, "--threads", threads, "-q"});
-    ASSERT_EQ(r.code(), 0) << threads << ": " << r.describe();
-    const std::string sl1 = readBytes(path(out));
-    ASSERT_TRUE(contains(sl1.substr(0, 4096), "thumbnail/thumbnail400x400.png")) << threads;
-    if (reference.empty())
-      reference = sl1;
-    else
-      EXPECT_TRUE(sl1 == reference) << "--threads " << threads << ": SL1 differs from --threads 1";
+  for (const std::string ext : {".sl1", ".goo", ".nanodlp"}) {
+    std::string reference;
+    for (const char* threads : {"1", "2", "4"}) {
+      const std::string out = std::string("held") + threads + ext;
+      const RunResult r = run(
+          {"slice", aligner, "-H", "0.05", "--printer", "sl1", "--masks", out, "--threads", threads, "-q"});
+      ASSERT_EQ(r.code(), 0) << threads << ": " << r.describe();
+      const std::string bytes = readBytes(path(out));
+      if (ext == ".sl1") {
+        ASSERT_TRUE(contains(bytes.substr(0, 4096), "thumbnail/thumbnail400x400.png")) << threads;
+      }
+      if (reference.empty())
+        reference = bytes;
+      else
+        EXPECT_TRUE(bytes == reference) << ext << ", --threads " << threads << ": differs from --threads 1";
+    }
   }
   expectNoTemporaries();
 }

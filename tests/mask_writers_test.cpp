@@ -917,6 +917,39 @@ TEST_F(Sl1Archive, DeferredThumbnailsGiveTheSameArchive) {
   EXPECT_TRUE(files[2] == files[0]);
 }
 
+// GOO and NanoDLP store their previews at finish (the GOO header is rewritten then, NanoDLP's 3d.png
+// added then): deferred, drawn by drawPreviews() on another thread while the layers are written, or
+// never asked for (drawn at finish), the file is the one whose previews were drawn when the sink was
+// made, byte for byte.
+TEST_F(Sl1Archive, DeferredPreviewsOfGooAndNanoDlpGiveTheSameFile) {
+  const FacetSoup model = fixtures::sphere(4.0, 48, 24);
+  MaskJob job = smallJob(120, 90, 3, false);
+  job.created = 1700000000;
+  job.previewModel = model.corners;
+  std::vector<MaskImage> masks;
+  for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(120, 90, 60, 45, 10.0 + 5 * k, false));
+  for (const std::string ext : {".goo", ".nanodlp"}) {
+    std::vector<std::string> files;
+    for (int way = 0; way < 3; ++way) {
+      MaskJob j = job;
+      j.deferPreviews = way > 0;
+      const fs::path out = dir_ / ("part" + std::to_string(way) + ext);
+      auto sink = makeMaskSink(out, j, false);
+      EXPECT_FALSE(sink->previewsBeforeLayers()) << ext;
+      std::thread previews;
+      if (way == 1) previews = std::thread([&sink] { sink->drawPreviews(); });
+      for (uint32_t k = 0; k < 3; ++k) sink->writeLayer(k, 0.1 * k, masks[k]);
+      if (previews.joinable()) previews.join();
+      sink->finish(j);
+      std::ifstream in(out, std::ios::binary);
+      files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    }
+    EXPECT_GT(files[0].size(), 1000u) << ext;
+    EXPECT_TRUE(files[1] == files[0]) << ext << ": drawn beside the layers";
+    EXPECT_TRUE(files[2] == files[0]) << ext << ": drawn at finish";
+  }
+}
+
 TEST_F(Sl1Archive, Zip64PastSixtyFiveThousandEntries) {
   const uint32_t layers = 70000;
   const MaskJob job = smallJob(8, 8, layers, false);

@@ -675,11 +675,12 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
   };
   parallelInvoke(topology, setUpOutputs);
-  // Deferred previews (the SL1 thumbnails) are drawn as a task beside the bands; the archive holds them
-  // first, as when drawn before. While the task draws, the in-order stage sets the encoded layers aside
-  // (moved out of their slots, up to kHeldBytes) instead of waiting for it, so no thread idles there;
-  // they are written, in order, once it is done. On one thread nothing else could draw them: the first
-  // layer waits (and so draws them) at once.
+  // Deferred previews (the printer files' pictures) are drawn as a task beside the bands. GOO and
+  // NanoDLP store them at finish, which waits for the task. SL1 stores its thumbnails first, as when
+  // drawn before: while the task draws, the in-order stage sets the encoded layers aside (moved out of
+  // their slots, up to kHeldBytes) instead of waiting for it, so no thread idles there; they are
+  // written, in order, once it is done. On one thread nothing else could draw them: the first layer
+  // waits (and so draws them) at once.
   std::optional<BackgroundTask> previews;
   if (maskSink) previews.emplace([&maskSink] { maskSink->drawPreviews(); });
   struct HeldLayer {
@@ -689,7 +690,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   constexpr std::size_t kHeldBytes = std::size_t{64} << 20;
   std::vector<HeldLayer> held;
   std::size_t heldBytes = 0;
-  const bool holdLayers = ThreadLimit::available() > 1;
+  const bool holdLayers = ThreadLimit::available() > 1 && maskSink && maskSink->previewsBeforeLayers();
   const auto writeHeldLayers = [&] {
     if (previews) previews->wait();
     for (HeldLayer& h : held) maskSink->writeEncodedLayer(h.k, planes[h.k], h.encoded);
@@ -803,7 +804,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
         heldBytes += r.encoded.bytes.size();
         held.push_back({k, std::move(r.encoded)});  // the slot's next encodeLayer allocates anew
       } else {
-        writeHeldLayers();
+        if (maskSink->previewsBeforeLayers()) writeHeldLayers();
         maskSink->writeEncodedLayer(k, planes[k], r.encoded);
       }
     }

@@ -184,14 +184,32 @@ class GooSink final : public EncodingMaskSink {
     job_.previewModel = {};
     if (job.grid.width > 0xFFFF || job.grid.height > 0xFFFF)
       throw OutputError(path.string() + ": a GOO file holds at most 65535 x 65535 pixels");
-    const PreviewSize sizes[2] = {{kGooSmallPreview, kGooSmallPreview}, {kGooBigPreview, kGooBigPreview}};
-    RgbImage pictures[2];
-    renderPreviews(job.previewModel, sizes, pictures, job.previewRunner);
-    BigEndian out(previews_);
-    appendRgb565(out, pictures[0]);
-    appendRgb565(out, pictures[1]);
+    // Deferred, the previews are drawn beside the layers and go in with the header at finish, which
+    // rewrites it anyway; until then the header holds dark previews of the same size.
+    preview_ = job.previewModel;
+    if (job.deferPreviews)
+      previews_.assign(
+          (std::size_t{kGooSmallPreview} * kGooSmallPreview + std::size_t{kGooBigPreview} * kGooBigPreview) *
+              2,
+          0);
+    else
+      drawPreviews();
     const std::vector<uint8_t> header = gooHeader(job_, 0, previews_);
     file_.write(header.data(), header.size());
+  }
+
+  void drawPreviews() override {
+    if (drawn_) return;
+    const PreviewSize sizes[2] = {{kGooSmallPreview, kGooSmallPreview}, {kGooBigPreview, kGooBigPreview}};
+    RgbImage pictures[2];
+    renderPreviews(preview_, sizes, pictures, job_.previewRunner);
+    std::vector<uint8_t> previews;
+    BigEndian out(previews);
+    appendRgb565(out, pictures[0]);
+    appendRgb565(out, pictures[1]);
+    previews_ = std::move(previews);
+    preview_ = {};
+    drawn_ = true;
   }
 
   void encodeLayer(uint32_t index, double /*z*/, const MaskImage& mask, EncodedMaskLayer& out,
@@ -263,6 +281,7 @@ class GooSink final : public EncodingMaskSink {
   }
 
   void finish(const MaskJob& finalJob) override {
+    drawPreviews();
     file_.write(kEnding, sizeof kEnding);
     MaskJob job = finalJob;
     job.previewModel = {};
@@ -274,6 +293,8 @@ class GooSink final : public EncodingMaskSink {
  private:
   OutputFile file_;
   MaskJob job_;
+  std::span<const Point3f> preview_;  // the model, until its previews are drawn
+  bool drawn_ = false;
   std::vector<uint8_t> previews_;  // small then big, RGB565 big-endian
   uint32_t next_ = 0;
 };

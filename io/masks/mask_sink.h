@@ -72,10 +72,11 @@ struct MaskJob {
   // Read only while makeMaskSink runs: sinks render what they need then and keep no reference, unless
   // deferPreviews. Empty: the previews show no model.
   std::span<const Point3f> previewModel;
-  // The caller keeps previewModel alive until the first layer is written (or finish), and the sinks
-  // that can draw their previews later (SL1) do so in drawPreviews() -- which the caller may run beside
-  // the first layers' encoding -- or, when it was not called, as the first layer is written. The
-  // archive is the same bytes either way.
+  // The caller keeps previewModel alive until finish, and the sinks draw their previews later, in
+  // drawPreviews() -- which the caller may run beside the layers' encoding -- or, when it was not
+  // called, when they need them: SL1 as its first layer is written (its thumbnails come first in the
+  // archive), GOO and NanoDLP at finish (the GOO header is rewritten then, NanoDLP's 3d.png is added
+  // then). The file is the same bytes either way.
   bool deferPreviews = false;
   // Runs the preview renderer's chunks (the tools give parallelChunkRunner); the pictures are the same
   // for any runner.
@@ -110,9 +111,13 @@ class MaskSink {
   // Writes what encodeLayer made of layer `index`, in order, as writeLayer would have. Default: decodes
   // the runs and calls writeLayer.
   virtual void writeEncodedLayer(uint32_t index, double z, const EncodedMaskLayer& layer);
-  // Draws the preview pictures a sink deferred (MaskJob::deferPreviews). Thread-safe with encodeLayer;
-  // call at most once, and only before the first writeLayer/writeEncodedLayer/finish. Default: nothing.
+  // Draws the preview pictures a sink deferred (MaskJob::deferPreviews). Thread-safe with encodeLayer,
+  // and with writeLayer/writeEncodedLayer where previewsBeforeLayers() is false; call at most once,
+  // before finish, and where previewsBeforeLayers() before the first layer is written. Default: nothing.
   virtual void drawPreviews() {}
+  // Whether deferred previews must be drawn before the first layer is written (SL1: the thumbnails are
+  // the archive's first entries); the caller then holds its layers or waits. Default: no.
+  virtual bool previewsBeforeLayers() const { return false; }
   // Completes the output and moves it under its final name. finalJob is the job as known at the end
   // (volumeMl filled); the layer count written is the number of layers written. Call at most once.
   virtual void finish(const MaskJob& finalJob) = 0;

@@ -57,8 +57,16 @@ class NanoDlpSink final : public EncodingMaskSink {
       : file_(path, overwrite),
         job_(job),
         zip_(file_, std::max<std::time_t>(maskCreationTime(job), 315532800)),
-        preview_(previewPng(job.previewModel, kPreviewWidth, kPreviewHeight, job.previewRunner)) {
+        model_(job.previewModel) {
     job_.previewModel = {};
+    if (!job.deferPreviews) drawPreviews();  // else beside the layers, or at finish, where 3d.png goes in
+  }
+
+  void drawPreviews() override {
+    if (drawn_) return;
+    preview_ = previewPng(model_, kPreviewWidth, kPreviewHeight, job_.previewRunner);
+    model_ = {};
+    drawn_ = true;
   }
 
   void encodeLayer(uint32_t index, double /*z*/, const MaskImage& mask, EncodedMaskLayer& out,
@@ -130,6 +138,7 @@ class NanoDlpSink final : public EncodingMaskSink {
     meta["Arch"] = architecture();
     meta["Profile"] = false;  // the printer keeps its own profile; profile.json is for reference
     zip_.add("meta.json", meta.dump());
+    drawPreviews();
     zip_.add("3d.png", preview_);
     zip_.close();
     file_.commit();
@@ -139,6 +148,8 @@ class NanoDlpSink final : public EncodingMaskSink {
   OutputFile file_;  // declared first: destroyed last, after zip_ has closed its handle
   MaskJob job_;
   ZipStream zip_;
+  std::span<const Point3f> model_;  // until its preview is drawn
+  bool drawn_ = false;
   std::vector<uint8_t> preview_;
   std::string info_;
   double totalArea_ = 0;

@@ -82,6 +82,8 @@ class Sl1Sink final : public EncodingMaskSink {
     }
   }
 
+  bool previewsBeforeLayers() const override { return true; }  // the thumbnails are the first entries
+
   // PrusaSlicer's two thumbnails, as it names them, drawn together.
   void drawPreviews() override {
     if (preview_.empty() || drawn_) return;
