@@ -312,7 +312,8 @@ struct RandomPly {
 
 bool sameCorners(const FacetSoup& a, const FacetSoup& b) {
   return a.corners.size() == b.corners.size() &&
-         std::memcmp(a.corners.data(), b.corners.data(), a.corners.size() * sizeof(Point3f)) == 0;
+         (a.corners.empty() ||  // no memcmp of an empty vector's null data
+          std::memcmp(a.corners.data(), b.corners.data(), a.corners.size() * sizeof(Point3f)) == 0);
 }
 
 // The fixed-record reader (chunks on a runner) gives the record-by-record soup, bit for bit, in both byte
