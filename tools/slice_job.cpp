@@ -664,7 +664,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       // Archive timestamps come from the model file, so the same input gives the same bytes.
       struct stat info {};
       if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
-      // The soup outlives the sink's use of it: the SL1 thumbnails are drawn beside the first layers.
+      // The soup outlives the sink's use of it: its previews are drawn beside the bands (below).
       maskJob.previewModel = soup.corners;
       maskJob.deferPreviews = true;
       maskJob.previewRunner = parallelChunkRunner();
