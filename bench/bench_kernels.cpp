@@ -82,9 +82,10 @@ void BM_Adjacency(benchmark::State& state) {
 }
 BENCHMARK(BM_Adjacency)->Unit(benchmark::kMillisecond);
 
-// The split forms (core/chunk_runner.h) on 1..N threads; Arg(1) is the split code on one thread.
-// The split forms on range(0) threads with a runner of width range(1): the weld splits from width 4
-// (2 x width partitions), the adjacency from width 2 (8 x width parts).
+// The split forms (core/chunk_runner.h) on range(0) threads with a runner of width range(1), which
+// may exceed the threads (the split code on fewer threads): the weld splits from width 4 (2 x width
+// partitions); the adjacency from width 2, its parts scanning every facet below width 4 and filed
+// from 4 on (8 x width parts).
 void BM_WeldSplit(benchmark::State& state) {
   const Fixture& f = fixture();
   ThreadLimit limit(static_cast<unsigned>(state.range(0)));

@@ -436,6 +436,15 @@ RawScratch& rawScratch() {
   return scratch;
 }
 
+// The trimmed raw offset loops of `region` for `mm`, each to sink(const Path&), before their union.
+template <class Sink>
+void trimmedRawLoops(const Paths& region, double mm, Sink&& sink) {
+  RawScratch& scratch = rawScratch();
+  scratch.offset.reset(static_cast<double>(toUnits(mm)), kMiterLimit);
+  for (const Path& path : region) scratch.add(path);
+  scratch.offset.build(sink);
+}
+
 Paths unite(const Paths& loops) {
   Paths united;
   ClipperLib::Clipper clipper;
@@ -451,11 +460,8 @@ Paths unite(const Paths& loops) {
 // region where their count is positive (the union under the negative rule with an outer box that it
 // makes). So the trims apply alike, at the convex corners, and the region is ClipperOffset's.
 Paths trimmedOffset(const Paths& region, double mm) {
-  RawScratch& scratch = rawScratch();
-  scratch.offset.reset(static_cast<double>(toUnits(mm)), kMiterLimit);
-  for (const Path& path : region) scratch.add(path);
   Paths loops;
-  scratch.offset.build([&](const Path& loop) { loops.push_back(loop); });
+  trimmedRawLoops(region, mm, [&](const Path& loop) { loops.push_back(loop); });
   return unite(loops);
 }
 
@@ -487,11 +493,8 @@ bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& 
   if (correction.absolute < 0 && !(correction.elephantFoot > 0)) {
     // trimmedOffset(solidRegion(sets, false), absolute) before its last union: the same loops.
     const Paths solid = solidRegion(sets, false);
-    RawScratch& scratch = rawScratch();
-    scratch.offset.reset(static_cast<double>(toUnits(correction.absolute)), kMiterLimit);
-    for (const Path& path : solid) scratch.add(path);
     out.clear(z);
-    scratch.offset.build([&](const Path& loop) { appendLoop(loop, out); });
+    trimmedRawLoops(solid, correction.absolute, [&](const Path& loop) { appendLoop(loop, out); });
     return true;
   }
   if (!growsOnly(sets, correction)) return false;

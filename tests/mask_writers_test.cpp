@@ -27,6 +27,7 @@
 #include "io/masks/mask_sink.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
+#include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/tinyexr_read.h"
 
@@ -165,6 +166,15 @@ MaskJob smallJob(uint32_t width, uint32_t height, uint32_t layers, bool antiAlia
   job.layerHeight = 0.025;
   job.layerCount = layers;
   job.antiAliased = antiAliased;
+  return job;
+}
+
+// smallJob with a fixed creation time and `model` (kept alive by the caller) for its previews.
+MaskJob previewJob(const FacetSoup& model, uint32_t width, uint32_t height, uint32_t layers,
+                   bool antiAliased) {
+  MaskJob job = smallJob(width, height, layers, antiAliased);
+  job.created = 1700000000;
+  job.previewModel = model.corners;
   return job;
 }
 
@@ -877,9 +887,7 @@ TEST_F(Sl1Archive, EncodesItselfWithoutPngAndIsReproducible) {
 // thumbnails first. Layers larger than the writer's 1 MiB buffer go out around it.
 TEST_F(Sl1Archive, DeferredThumbnailsGiveTheSameArchive) {
   const FacetSoup model = fixtures::sphere(4.0, 48, 24);
-  MaskJob job = smallJob(1200, 900, 3, true);
-  job.created = 1700000000;
-  job.previewModel = model.corners;
+  const MaskJob job = previewJob(model, 1200, 900, 3, true);
   std::vector<MaskImage> masks;
   std::mt19937 random(3);
   for (uint32_t k = 0; k < 3; ++k) {
@@ -902,8 +910,7 @@ TEST_F(Sl1Archive, DeferredThumbnailsGiveTheSameArchive) {
     if (previews.joinable()) previews.join();
     for (uint32_t k = 0; k < 3; ++k) sink->writeEncodedLayer(k, 0.1 * k, encoded[k]);
     sink->finish(j);
-    std::ifstream in(out, std::ios::binary);
-    files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    files.push_back(fixtures::readFile(out));
     const ZipContents z = readZip(out);
     ASSERT_EQ(z.order.size(), 7u);
     EXPECT_EQ(z.order[0], "thumbnail/thumbnail400x400.png");
@@ -923,9 +930,7 @@ TEST_F(Sl1Archive, DeferredThumbnailsGiveTheSameArchive) {
 // made, byte for byte.
 TEST_F(Sl1Archive, DeferredPreviewsOfGooAndNanoDlpGiveTheSameFile) {
   const FacetSoup model = fixtures::sphere(4.0, 48, 24);
-  MaskJob job = smallJob(120, 90, 3, false);
-  job.created = 1700000000;
-  job.previewModel = model.corners;
+  const MaskJob job = previewJob(model, 120, 90, 3, false);
   std::vector<MaskImage> masks;
   for (uint32_t k = 0; k < 3; ++k) masks.push_back(discMask(120, 90, 60, 45, 10.0 + 5 * k, false));
   for (const std::string ext : {".goo", ".nanodlp"}) {
@@ -941,8 +946,7 @@ TEST_F(Sl1Archive, DeferredPreviewsOfGooAndNanoDlpGiveTheSameFile) {
       for (uint32_t k = 0; k < 3; ++k) sink->writeLayer(k, 0.1 * k, masks[k]);
       if (previews.joinable()) previews.join();
       sink->finish(j);
-      std::ifstream in(out, std::ios::binary);
-      files.emplace_back((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+      files.push_back(fixtures::readFile(out));
     }
     EXPECT_GT(files[0].size(), 1000u) << ext;
     EXPECT_TRUE(files[1] == files[0]) << ext << ": drawn beside the layers";

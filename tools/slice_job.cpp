@@ -690,7 +690,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   constexpr std::size_t kHeldBytes = std::size_t{64} << 20;
   std::vector<HeldLayer> held;
   std::size_t heldBytes = 0;
-  const bool holdLayers = ThreadLimit::available() > 1 && maskSink && maskSink->previewsBeforeLayers();
+  const bool previewsFirst = maskSink && maskSink->previewsBeforeLayers();
+  const bool holdLayers = previewsFirst && ThreadLimit::available() > 1;
   const auto writeHeldLayers = [&] {
     if (previews) previews->wait();
     for (HeldLayer& h : held) maskSink->writeEncodedLayer(h.k, planes[h.k], h.encoded);
@@ -804,7 +805,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
         heldBytes += r.encoded.bytes.size();
         held.push_back({k, std::move(r.encoded)});  // the slot's next encodeLayer allocates anew
       } else {
-        if (maskSink->previewsBeforeLayers()) writeHeldLayers();
+        if (previewsFirst) writeHeldLayers();
         maskSink->writeEncodedLayer(k, planes[k], r.encoded);
       }
     }
