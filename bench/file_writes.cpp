@@ -157,11 +157,16 @@ int main(int argc, char** argv) {
   Setup s;
   for (int i = 1; i + 1 < argc; i += 2) {
     const std::string opt = argv[i];
-    if (opt == "--mb") s.bytes = std::strtoull(argv[i + 1], nullptr, 10) << 20;
-    else if (opt == "--piece-kb") s.piece = std::strtoull(argv[i + 1], nullptr, 10) << 10;
-    else if (opt == "--threads") s.threads = parseList(argv[i + 1]);
-    else if (opt == "--repeat") s.repeat = std::atoi(argv[i + 1]);
-    else if (opt == "--dir") s.dir = argv[i + 1];
+    if (opt == "--mb")
+      s.bytes = std::strtoull(argv[i + 1], nullptr, 10) << 20;
+    else if (opt == "--piece-kb")
+      s.piece = std::strtoull(argv[i + 1], nullptr, 10) << 10;
+    else if (opt == "--threads")
+      s.threads = parseList(argv[i + 1]);
+    else if (opt == "--repeat")
+      s.repeat = std::atoi(argv[i + 1]);
+    else if (opt == "--dir")
+      s.dir = argv[i + 1];
     else {
       std::fprintf(stderr, "file_writes: unknown option %s\n", opt.c_str());
       return 2;
@@ -194,10 +199,14 @@ int main(int argc, char** argv) {
       const Config& config = configs[c];
       const std::string name = config.name;
       double t = 0;
-      if (name == "write") t = writeSerial(s, path, data.data());
-      else if (name == "writev") t = writeGathered(s, path, data.data());
-      else if (name == "pwrite") t = writeParallel(s, path, data.data(), config.threads);
-      else t = writeMapped(s, path, data.data(), config.threads);
+      if (name == "write")
+        t = writeSerial(s, path, data.data());
+      else if (name == "writev")
+        t = writeGathered(s, path, data.data());
+      else if (name == "pwrite")
+        t = writeParallel(s, path, data.data(), config.threads);
+      else
+        t = writeMapped(s, path, data.data(), config.threads);
       times[c].push_back(t);
       ::unlink(path.c_str());
     }
