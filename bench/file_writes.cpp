@@ -66,10 +66,22 @@ void onThreads(int n, Body body) {
   for (std::thread& th : pool) th.join();
 }
 
+// A new file (never an existing one) opened with `access` (O_WRONLY or O_RDWR).
+int createFile(const std::string& path, int access) {
+  const int fd = ::open(path.c_str(), access | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+  if (fd < 0) die("open " + path);
+  return fd;
+}
+
+// Closes fd; the seconds from start, the close included.
+double closedAfter(int fd, std::chrono::steady_clock::time_point start) {
+  if (::close(fd) != 0) die("close");
+  return secondsSince(start);
+}
+
 double writeSerial(const Setup& s, const std::string& path, const char* data) {
   const auto start = std::chrono::steady_clock::now();
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) die("open " + path);
+  const int fd = createFile(path, O_WRONLY);
   std::vector<char> buffer(std::size_t{1} << 20);
   std::size_t used = 0;
   auto flush = [&] {
@@ -87,15 +99,13 @@ double writeSerial(const Setup& s, const std::string& path, const char* data) {
     used += n;
   }
   flush();
-  if (::close(fd) != 0) die("close");
-  return secondsSince(start);
+  return closedAfter(fd, start);
 }
 
 // The pieces themselves, 16 at a time, with writev: no copy into a buffer of our own.
 double writeGathered(const Setup& s, const std::string& path, const char* data) {
   const auto start = std::chrono::steady_clock::now();
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) die("open " + path);
+  const int fd = createFile(path, O_WRONLY);
   constexpr int kGather = 16;
   iovec pieces[kGather];
   for (std::size_t at = 0; at < s.bytes;) {
@@ -110,14 +120,12 @@ double writeGathered(const Setup& s, const std::string& path, const char* data) 
     const ssize_t w = ::writev(fd, pieces, n);
     if (w < 0 || static_cast<std::size_t>(w) != total) die("writev");
   }
-  if (::close(fd) != 0) die("close");
-  return secondsSince(start);
+  return closedAfter(fd, start);
 }
 
 double writeParallel(const Setup& s, const std::string& path, const char* data, int threads) {
   const auto start = std::chrono::steady_clock::now();
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) die("open " + path);
+  const int fd = createFile(path, O_WRONLY);
   std::atomic<std::size_t> next{0};
   onThreads(threads, [&](int) {
     for (std::size_t at; (at = next.fetch_add(s.piece)) < s.bytes;) {
@@ -129,14 +137,12 @@ double writeParallel(const Setup& s, const std::string& path, const char* data, 
       }
     }
   });
-  if (::close(fd) != 0) die("close");
-  return secondsSince(start);
+  return closedAfter(fd, start);
 }
 
 double writeMapped(const Setup& s, const std::string& path, const char* data, int threads) {
   const auto start = std::chrono::steady_clock::now();
-  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
-  if (fd < 0) die("open " + path);
+  const int fd = createFile(path, O_RDWR);
   if (::fallocate(fd, 0, 0, static_cast<off_t>(s.bytes)) != 0) die("fallocate");
   void* map = ::mmap(nullptr, s.bytes, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
   if (map == MAP_FAILED) die("mmap");
@@ -147,8 +153,7 @@ double writeMapped(const Setup& s, const std::string& path, const char* data, in
       std::memcpy(out + at, data + at, std::min(s.piece, s.bytes - at));
   });
   if (::munmap(map, s.bytes) != 0) die("munmap");
-  if (::close(fd) != 0) die("close");
-  return secondsSince(start);
+  return closedAfter(fd, start);
 }
 
 }  // namespace
