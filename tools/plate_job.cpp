@@ -262,10 +262,6 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     maskJob.previewModel = {};
     transfer = maskTransfer(print, maskJob);
   }
-  // Absolute correction and elephant foot, part by part on its solid region (model, add-ons, removals):
-  // every output sees the corrected parts, as a part sliced alone would be corrected.
-  const bool correcting = correctsLayers(print);
-
   SliceSettings settings;
   if (!job.method.empty()) parseSliceMethod(job.method, settings.method);
   const BandPlan plan = planBands(planes.size(), settings);
@@ -305,9 +301,11 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     SlotState& s = slots[slot];
     LayerResult& r = s.layers[position];
     std::fill(r.partArea.begin(), r.partArea.end(), 0.0);
-    // A nil correction (above the elephant foot, no absolute correction): the sliced layer, moved.
-    const LayerCorrection correction =
-        correcting ? layerCorrection(print, k, planes.size()) : LayerCorrection{};
+    // Absolute correction and elephant foot, part by part on its solid region (model, add-ons,
+    // removals): every output sees the corrected parts, as a part sliced alone would be corrected. A nil
+    // correction (no correction set, or above the elephant foot without an absolute one): the sliced
+    // layer, moved.
+    const LayerCorrection correction = layerCorrection(print, k, planes.size());
     if (correction.any()) {
       // Each part corrected where it was sliced, then moved: the same loops as the part corrected alone.
       for (std::size_t m = 0; m < partCount; ++m) {

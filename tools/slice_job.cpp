@@ -254,10 +254,6 @@ MaskTransfer maskTransfer(const PrintSettings& print, const MaskJob& job) {
   return t;
 }
 
-bool correctsLayers(const PrintSettings& print) {
-  return print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
-}
-
 LayerCorrection layerCorrection(const PrintSettings& print, uint32_t k, std::size_t layers) {
   const auto footLayers =
       static_cast<uint32_t>(std::clamp<std::size_t>(layers, 1, print.elephantFootFadeLayers()));
@@ -730,7 +726,6 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   // Per-layer area and islands feed the masks (the archive's resin volume) and the report; a contour-only
   // run without a report prints no volume, so it skips that pass over every point.
   const bool measureLayers = masks || report || !options.summary.empty();
-  const bool correcting = correctsLayers(print);
   const bool polygonsNeeded = !sinks.empty() || report != nullptr;  // outputs made of the corrected loops
   stages.process = [&](uint32_t k, std::span<const LayerContours> sliced, std::size_t slot,
                        uint32_t position) {
@@ -738,10 +733,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     LayerResult& r = s.layers[position];
     std::span<const LayerContours> layer = sliced;
     bool raw = false;  // the masks rasterize s.rawLoops
-    // A layer whose correction is nil (above the elephant foot, with no absolute correction) is the
-    // sliced layer, as in a job without corrections, not a union of it.
-    const LayerCorrection correction =
-        correcting ? layerCorrection(print, k, planes.size()) : LayerCorrection{};
+    // A layer whose correction is nil (no correction set, or above the elephant foot without an absolute
+    // one) is the sliced layer, not a union of it.
+    const LayerCorrection correction = layerCorrection(print, k, planes.size());
     r.correctedLayer = correction.any();
     if (r.correctedLayer) {
       // Absolute correction and elephant foot on the layer's solid region (model, add-ons and removals

@@ -71,9 +71,8 @@ struct MaskTransfer {
 MaskTransfer maskTransfer(const PrintSettings& print, const MaskJob& job);
 
 // The absolute correction and elephant foot (offset/polygon_offset.h) of layer k of a job of `layers`
-// layers: the foot fades over min(layers, the fade layers), as PrusaSlicer does. correctsLayers: whether
-// any layer is offset at all.
-bool correctsLayers(const PrintSettings& print);
+// layers: the foot fades over min(layers, the fade layers), as PrusaSlicer does. Nil (any() false) on
+// every layer of a job without corrections.
 LayerCorrection layerCorrection(const PrintSettings& print, uint32_t k, std::size_t layers);
 
 // Bounds, signed volume and degenerate facets of a soup, in parallel over fixed blocks of facets whose
