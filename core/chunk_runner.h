@@ -6,6 +6,8 @@
 
 #include <cstddef>
 #include <functional>
+#include <span>
+#include <vector>
 
 namespace toposlice {
 
@@ -25,6 +27,27 @@ inline const ChunkRunner& serialChunkRunner() {
                                   },
                                   1};
   return runner;
+}
+
+// Filing items by part, chunk by chunk, so that each part later reads only its own (the split weld and
+// adjacency): counts[c * parts + p] holds how many items chunk c files into part p. Turns each count into
+// the position where chunk c writes its first such item, in one array of part after part (each part's
+// items in chunk order), and returns where each part begins (parts + 1 entries, the last the total). A
+// chunk then writes its items at counts[c * parts + p]++, sharing no word with another chunk.
+template <class Count>
+std::vector<std::size_t> filePositions(std::span<Count> counts, std::size_t chunks, std::size_t parts) {
+  std::vector<std::size_t> partBegin(parts + 1, 0);
+  std::size_t at = 0;
+  for (std::size_t p = 0; p < parts; ++p) {
+    partBegin[p] = at;
+    for (std::size_t c = 0; c < chunks; ++c) {
+      const std::size_t count = counts[c * parts + p];
+      counts[c * parts + p] = static_cast<Count>(at);
+      at += count;
+    }
+  }
+  partBegin[parts] = at;
+  return partBegin;
 }
 
 }  // namespace toposlice

@@ -83,20 +83,11 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
   struct Owned {
     uint32_t lower, upper, half;
   };
-  std::vector<std::size_t> partBegin(parts + 1, 0);
+  std::vector<std::size_t> partBegin;
   std::vector<Owned> owned;
   if (filed) {
-    std::size_t at = 0;
-    for (std::size_t p = 0; p < parts; ++p) {
-      partBegin[p] = at;
-      for (std::size_t c = 0; c < facetChunks; ++c) {
-        const std::size_t count = chunkPartAt[c * parts + p];
-        chunkPartAt[c * parts + p] = at;
-        at += count;
-      }
-    }
-    partBegin[parts] = at;
-    owned.resize(at);
+    partBegin = filePositions(std::span(chunkPartAt), facetChunks, parts);
+    owned.resize(partBegin[parts]);
     run.run(facetChunks, 1, [&](std::size_t c0, std::size_t c1) {
       for (std::size_t c = c0; c < c1; ++c)
         forHalfEdges(c * kFacetChunk, chunkEnd(c), [&](std::size_t h, uint32_t lower, uint32_t upper) {

@@ -59,24 +59,13 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
   // cost more from 4 partitions on, and grew with their number: BM_WeldSplit, the aligner, 2 threads,
   // 4 partitions 14.8 ms filed against 15.6 gathered, 16 partitions 16.4 against 21.4.)
   std::vector<uint32_t> members(n);  // the corners of every partition
-  std::vector<std::size_t> partBegin(parts + 1, 0);
-  {
-    std::size_t at = 0;
-    for (unsigned p = 0; p < parts; ++p) {
-      partBegin[p] = at;
-      for (std::size_t c = 0; c < chunks; ++c) {
-        const uint32_t count = partSize[c * parts + p];
-        partSize[c * parts + p] = static_cast<uint32_t>(at);  // now the chunk's next position
-        at += count;
-      }
-    }
-    partBegin[parts] = at;
-    runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
-      for (std::size_t c = c0; c < c1; ++c)
-        for (std::size_t i = c * kChunk; i < chunkEnd(c); ++i)
-          members[partSize[c * parts + part[i]]++] = static_cast<uint32_t>(i);
-    });
-  }
+  // partSize: from here, each chunk's next position in `members`
+  const std::vector<std::size_t> partBegin = filePositions(std::span(partSize), chunks, parts);
+  runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
+    for (std::size_t c = c0; c < c1; ++c)
+      for (std::size_t i = c * kChunk; i < chunkEnd(c); ++i)
+        members[partSize[c * parts + part[i]]++] = static_cast<uint32_t>(i);
+  });
   const std::unique_ptr<uint32_t[]> first(new uint32_t[n]);  // the corner's first occurrence
   std::vector<uint32_t> firsts(chunks * parts, 0);           // first occurrences per chunk and partition
   runner.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
