@@ -602,6 +602,25 @@ class PlyParser {
   std::vector<uint32_t> triangles_;  // 3 vertex indices per facet
 };
 
+// The record-by-record reading of the data after `header` (parsed from `bytes`).
+FacetSoup readRecords(std::span<const std::byte> bytes, const Header& header, PlyParser& parser,
+                      const std::string& name, PlySource& out) {
+  out = PlySource{};
+  FacetSoup soup;
+  if (header.encoding == Encoding::kAscii) {
+    const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+    const std::size_t headerLines =
+        static_cast<std::size_t>(std::count(text.begin(), text.begin() + header.dataOffset, '\n'));
+    AsciiCursor cursor(text.substr(header.dataOffset), headerLines + 1, name);
+    parser.read(cursor, out, soup);
+  } else {
+    out.binary = true;
+    BinaryCursor cursor(bytes.subspan(header.dataOffset), header.encoding == Encoding::kBinaryBig, name);
+    parser.read(cursor, out, soup);
+  }
+  return soup;
+}
+
 }  // namespace
 
 FacetSoup parsePly(std::span<const std::byte> bytes, const std::string& name, PlySource* source,
@@ -610,8 +629,8 @@ FacetSoup parsePly(std::span<const std::byte> bytes, const std::string& name, Pl
   PlySource& out = source ? *source : local;
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
   const Header header = parseHeader(text, name);
+  PlyParser parser(header, name);
   if (header.encoding != Encoding::kAscii) {
-    PlyParser parser(header, name);
     FacetSoup soup;
     if (parser.readFixed(bytes.subspan(header.dataOffset), header.encoding == Encoding::kBinaryBig, soup,
                          runner)) {
@@ -620,29 +639,15 @@ FacetSoup parsePly(std::span<const std::byte> bytes, const std::string& name, Pl
       return soup;
     }
   }
-  return parsePlyRecords(bytes, name, source);
+  return readRecords(bytes, header, parser, name, out);
 }
 
 FacetSoup parsePlyRecords(std::span<const std::byte> bytes, const std::string& name, PlySource* source) {
   PlySource local;
-  PlySource& out = source ? *source : local;
-  out = PlySource{};
   const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
   const Header header = parseHeader(text, name);
   PlyParser parser(header, name);
-  FacetSoup soup;
-  const std::span<const std::byte> data = bytes.subspan(header.dataOffset);
-  if (header.encoding == Encoding::kAscii) {
-    const std::size_t headerLines =
-        static_cast<std::size_t>(std::count(text.begin(), text.begin() + header.dataOffset, '\n'));
-    AsciiCursor cursor(text.substr(header.dataOffset), headerLines + 1, name);
-    parser.read(cursor, out, soup);
-  } else {
-    out.binary = true;
-    BinaryCursor cursor(data, header.encoding == Encoding::kBinaryBig, name);
-    parser.read(cursor, out, soup);
-  }
-  return soup;
+  return readRecords(bytes, header, parser, name, source ? *source : local);
 }
 
 }  // namespace toposlice
