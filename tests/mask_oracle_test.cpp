@@ -433,6 +433,35 @@ void checkCoverageAgainstClipping(std::span<const std::vector<LayerContours>> st
   EXPECT_GT(partial, 100u) << "the layers should have edge pixels";
 }
 
+TEST(MaskOracle, AlignerRowsByClustersEqualTheBandedPath) {
+  // The aligner at 1 um on the SL1 pixel (0.04725 mm): its outlines turn up and down inside pixel rows
+  // (a local extreme every few vertices). 300 consecutive layers, every row by the clusters where they
+  // apply against every row by the banded path: the same bytes.
+  const FacetSoup aligner = readStl(fixtures::modelPath("derived/aligner_upper_case0.stl.gz"));
+  const BoundingBox b = boundsOf(aligner.corners);
+  const double z0 = b.min.z + 0.25 * (b.max.z - b.min.z);
+  std::vector<double> planes(300);
+  for (std::size_t k = 0; k < planes.size(); ++k) planes[k] = z0 + 0.001 * static_cast<double>(k);
+  const std::vector<LayerContours> layers = fixtures::sliceToVector(aligner, planes, SliceMethod::SelfReuse);
+  const PixelGrid grid = gridAround(b, 0.04725);
+  RasterScratch clustered, banded;
+  banded.alwaysBanded = true;
+  MaskImage a, c;
+  std::size_t rows = 0;
+  for (std::size_t k = 0; k < layers.size(); ++k) {
+    const ContourSet sets[] = {{&layers[k], 1}};
+    uint64_t sumA = 0, sumC = 0;
+    rasterizeCoverage(sets, grid, a, clustered, &sumA);
+    rasterizeCoverage(sets, grid, c, banded, &sumC);
+    ASSERT_EQ(a.pixels, c.pixels) << "layer " << k;
+    ASSERT_EQ(sumA, sumC) << "layer " << k;
+    rows = banded.bandedRows;
+  }
+  EXPECT_GT(clustered.clusteredRows, 9 * rows / 10);  // most rows by clusters,
+  EXPECT_GT(clustered.extremeRows, rows / 20);        // many with local extremes inside the row
+  EXPECT_GT(clustered.bandedRows, 0u);
+}
+
 TEST(MaskOracle, AntiAliasedMatchesExactClipping) {
   const FacetSoup femur = readStl(fixtures::modelPath("knee_femur_ssm_S001.stl"));
   const BoundingBox b = boundsOf(femur.corners);

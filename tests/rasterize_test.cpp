@@ -9,6 +9,7 @@
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <numeric>
 #include <random>
 #include <string>
 #include <vector>
@@ -624,6 +625,169 @@ TEST(RasterCoverage, RandomOffGridLoopsMatchExactClipping) {
     rasterizeCoverage(sets, grid, m, scratch);
     expectExactCoverage(sets, grid, m, "trial " + std::to_string(trial));
   }
+}
+
+// Rasterizes `sets` twice, by clusters where they apply and with every row on the banded path, and
+// expects the same bytes, extents and value sums, except that a pixel whose exact 255 * area is a half
+// (to 1e-9) may round either way (the two paths add the same areas in a different order where a row's
+// cluster is not one chain); both must match the exact oracle. Returns the clustered scratch's row
+// counts.
+RasterScratch expectClustersEqualBanded(const std::vector<ContourSet>& sets, const PixelGrid& grid,
+                                        const std::string& what) {
+  RasterScratch clustered, banded;
+  banded.alwaysBanded = true;
+  MaskImage a, b;
+  uint64_t sumA = 0, sumB = 0;
+  rasterizeCoverage(sets, grid, a, clustered, &sumA);
+  rasterizeCoverage(sets, grid, b, banded, &sumB);
+  EXPECT_EQ(banded.clusteredRows, 0u) << what;
+  const std::vector<double> area = fixtures::exactCoverage(sets, grid);
+  std::size_t ties = 0;
+  for (uint32_t j = 0; j < grid.height; ++j) {
+    for (uint32_t i = 0; i < grid.width; ++i) {
+      const uint32_t mi = grid.mirrorX ? grid.width - 1 - i : i, mj = grid.mirrorY ? grid.height - 1 - j : j;
+      const std::size_t at = std::size_t{mj} * grid.width + mi;
+      if (a.pixels[at] == b.pixels[at]) continue;
+      const double scaled = 255.0 * area[std::size_t{j} * grid.width + i];
+      EXPECT_NEAR(std::abs(scaled - std::floor(scaled) - 0.5), 0.0, 1e-9)
+          << what << " pixel " << i << "," << j;
+      EXPECT_EQ(std::abs(a.pixels[at] - b.pixels[at]), 1) << what << " pixel " << i << "," << j;
+      ++ties;
+    }
+  }
+  if (ties == 0) {
+    EXPECT_EQ(a.litBegin, b.litBegin) << what;
+    EXPECT_EQ(a.litEnd, b.litEnd) << what;
+    EXPECT_EQ(sumA, sumB) << what;
+  }
+  EXPECT_EQ(sumA, std::accumulate(a.pixels.begin(), a.pixels.end(), uint64_t{0})) << what;
+  expectExactCoverage(sets, grid, a, what);
+  return clustered;
+}
+
+// A star-shaped loop around (cx, cy): n vertices at increasing angles, radius r plus a wiggle of
+// amplitude `wiggle` (random per vertex), so the outline turns up and down inside pixel rows as the
+// aligner's 1 um slices do. Counter-clockwise.
+Loop wigglyLoop(std::mt19937& rng, double cx, double cy, double r, double wiggle, int n) {
+  std::uniform_real_distribution<double> noise(-wiggle, wiggle);
+  Loop loop;
+  for (int k = 0; k < n; ++k) {
+    const double a = 2.0 * std::numbers::pi * k / n, radius = r + noise(rng);
+    loop.push_back({cx + radius * std::cos(a), cy + radius * std::sin(a)});
+  }
+  return loop;
+}
+
+TEST(RasterCoverage, ClusteredRowsEqualBandedRowsOnWigglyOutlines) {
+  // Simple outlines whose boundary turns up and down inside rows (clusters with local extremes), with
+  // holes, on a mirrored grid; every row decided by clusters must give the banded path's bytes.
+  std::mt19937 rng(2026);
+  std::size_t clustered = 0, extremes = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    PixelGrid grid = makeGrid(-0.013, 0.021, 0.5 + 0.05 * (trial % 5), 40, 38);
+    grid.mirrorX = trial % 2 == 0;
+    const double w = 0.02 + 0.04 * (trial % 4);
+    std::vector<Loop> loops = {wigglyLoop(rng, 10, 9.5, 8, w, 300 + 40 * trial)};
+    if (trial % 3 != 0) loops.push_back(reversed(wigglyLoop(rng, 10.2, 9.3, 4, w, 200)));  // a hole
+    if (trial % 4 == 1) loops.push_back(wigglyLoop(rng, 10.1, 9.4, 2, w, 150));            // an island in it
+    const LayerContours layer = makeLayer(loops);
+    const RasterScratch s = expectClustersEqualBanded({{&layer, 1}}, grid, "trial " + std::to_string(trial));
+    clustered += s.clusteredRows;
+    extremes += s.extremeRows;
+  }
+  EXPECT_GT(clustered, 1000u);  // the fixture exercises clusters, and clusters with local extremes
+  EXPECT_GT(extremes, 200u);
+}
+
+TEST(RasterCoverage, ClusteredRowsEqualBandedRowsOnOverlappingWigglyLoops) {
+  // Pairs and triples of wiggly outlines of both orientations crossing one another at random: counts
+  // from -2 to 3, crossings inside rows, caps crossing chains; a quarter of them on a lattice.
+  std::mt19937 rng(31337);
+  std::uniform_real_distribution<double> centre(5, 11), radius(1.5, 5), wiggle(0.01, 0.4);
+  std::size_t banded = 0;
+  for (int trial = 0; trial < 150; ++trial) {
+    std::vector<Loop> loops;
+    for (int l = 0; l < 2 + trial % 2; ++l) {
+      Loop loop = wigglyLoop(rng, centre(rng), centre(rng), radius(rng), wiggle(rng), 20 + 7 * (trial % 11));
+      if (trial % 4 == 3) {  // on a quarter-pixel lattice: vertices on row lines, touching loops
+        for (Point2d& p : loop) p = {0.25 * std::round(4 * p.x), 0.25 * std::round(4 * p.y)};
+      }
+      loops.push_back(l == 1 && trial % 3 == 0 ? reversed(loop) : loop);
+    }
+    const LayerContours layer = makeLayer(loops);
+    const PixelGrid grid =
+        makeGrid(trial % 4 == 3 ? 0 : 0.1, trial % 4 == 3 ? 0 : -0.07, trial % 2 == 0 ? 1.0 : 0.5, 18, 18);
+    banded += expectClustersEqualBanded({{&layer, 1}}, grid, "trial " + std::to_string(trial)).bandedRows;
+  }
+  EXPECT_GT(banded, 100u);
+}
+
+TEST(RasterCoverage, OverlapsAndTouchingLoopsLeaveTheClusters) {
+  // Configurations whose count leaves {0, 1} or whose loops meet, each next to plain rows: they must be
+  // exact (the oracle) and equal to the banded path whichever path takes them.
+  std::mt19937 rng(99);
+  struct Case {
+    std::string what;
+    std::vector<Loop> loops;
+    std::vector<Loop> removal;
+  };
+  const std::vector<Case> cases = {
+      {"overlapping outlines (count 2)",
+       {wigglyLoop(rng, 8, 8, 5, 0.05, 400), wigglyLoop(rng, 11, 9, 5, 0.05, 400)},
+       {}},
+      {"island of the same orientation inside an outline",
+       {wigglyLoop(rng, 10, 10, 7, 0.05, 400), wigglyLoop(rng, 10, 10, 3, 0.05, 300)},
+       {}},
+      {"a loop inside one row, inside an outline",
+       {rect(2, 2.5, 15, 15), {{5.2, 7.2}, {6.7, 7.4}, {5.9, 7.8}}},
+       {}},
+      {"a hole inside one row", {rect(2, 2.5, 15, 15), reversed({{5.2, 7.2}, {6.7, 7.4}, {5.9, 7.8}})}, {}},
+      {"a loop inside one row, alone", {{{5.2, 7.2}, {6.7, 7.4}, {5.9, 7.8}}}, {}},
+      {"squares touching at a vertex", {rect(2, 2, 6.5, 6.5), rect(6.5, 6.5, 11, 11)}, {}},
+      {"squares sharing an edge", {rect(2, 2.25, 6.5, 9.75), rect(6.5, 3.5, 11, 8.25)}, {}},
+      {"an edge through another loop's vertex",
+       {{{2, 2}, {8, 5}, {2, 8}}, {{8, 2.5}, {8, 7.5}, {5, 5.0}, {3, 5}, {3, 4.5}}},
+       {}},
+      {"crossing wiggly outlines, one reversed",
+       {wigglyLoop(rng, 8, 8, 5, 0.05, 400), reversed(wigglyLoop(rng, 10, 8, 5, 0.05, 400))},
+       {}},
+      {"removal over the outline's edge",
+       {wigglyLoop(rng, 8, 8, 6, 0.05, 400)},
+       {rect(11.3, 5.2, 16.6, 10.9)}},
+      {"removal equal to the outline", {rect(3.25, 3.5, 9.75, 12.25)}, {rect(3.25, 3.5, 9.75, 12.25)}},
+      {"local minimum on a row line", {{{5, 4}, {9, 7.5}, {9, 10}, {1, 10}, {1, 7.5}}}, {}},
+      // Counts outside {0, 1} inside partially covered pixels (where a wrong count would show):
+      {"a clockwise loop inside one row, left of an outline's edge in the same pixel",
+       {rect(5.8, 2.5, 15, 15), reversed({{5.1, 7.2}, {5.6, 7.3}, {5.3, 7.8}})},
+       {}},
+      {"a loop inside one row, inside an outline's edge pixel",
+       {rect(5.3, 2.5, 15, 15), {{5.5, 7.2}, {5.9, 7.3}, {5.6, 7.8}}},
+       {}},
+      {"a peak inside a row, inside an outline's edge pixel",
+       {rect(2, 2, 6.4, 15), {{5.8, 3}, {6.3, 3}, {6.05, 7.5}}},
+       {}},
+      {"a valley inside a row, inside an outline's edge pixel",
+       {rect(2, 2, 6.4, 15), {{6.05, 7.5}, {6.3, 12}, {5.8, 12}}},
+       {}},
+      {"a clockwise peak crossing into an outline's edge pixel",
+       {rect(6.2, 2, 12, 15), reversed({{5.7, 3}, {6.6, 3}, {6.1, 7.5}})},
+       {}},
+  };
+  std::size_t clustered = 0, banded = 0;
+  for (const Case& c : cases) {
+    const LayerContours layer = makeLayer(c.loops), removal = makeLayer(c.removal);
+    std::vector<ContourSet> sets = {{&layer, 1}};
+    if (!c.removal.empty()) sets.push_back({&removal, -1});
+    for (const double pixel : {1.0, 0.37}) {
+      const PixelGrid grid =
+          makeGrid(0, 0, pixel, static_cast<uint32_t>(20 / pixel), static_cast<uint32_t>(18 / pixel));
+      const RasterScratch s = expectClustersEqualBanded(sets, grid, c.what);
+      clustered += s.clusteredRows;
+      banded += s.bandedRows;
+    }
+  }
+  EXPECT_GT(clustered, 100u);
+  EXPECT_GT(banded, 50u);
 }
 
 TEST(RasterCoverage, ManyCrossingEdgesAreSampledWithinTheMidpointBound) {

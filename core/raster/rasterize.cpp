@@ -284,6 +284,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
     const std::size_t n = loop.size();
     std::vector<int32_t>& ids = scratch.loopIds;
     ids.assign(n, -1);
+    double vLow = std::numeric_limits<double>::infinity(), vHigh = -vLow;  // of its edges in the table
     for (std::size_t i = 0; i < n; ++i) {
       const Point2d a = gridPoint(loop[i], grid.transposed);
       const Point2d b = gridPoint(loop[i + 1 == n ? 0 : i + 1], grid.transposed);
@@ -302,16 +303,23 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       const int32_t winding = upward ? -sign : sign;
       ids[i] = static_cast<int32_t>(edges.size());
       edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
-                                   static_cast<uint32_t>(edges.size()), -1});
+                                   static_cast<uint32_t>(edges.size()), -1, -1, -1, false});
+      vLow = std::min(vLow, v0);
+      vHigh = std::max(vHigh, v1);
     }
-    // The edge continuing each one upwards: the next edge of the loop for an upward edge, the
-    // previous one for a downward edge, when it runs the same way (else the chain ends there).
+    // The loop's neighbours at each end: for an upward edge the next edge is at its top and the
+    // previous one at its bottom, for a downward edge the other way round. The neighbour at the top
+    // continues the chain upwards when it runs the same way (else the chain ends there).
+    const bool inOneRow = vLow <= vHigh && std::ceil(vHigh) - std::floor(vLow) <= 1.0;
     for (std::size_t i = 0; i < n; ++i) {
       if (ids[i] < 0) continue;
       CoverageEdge& e = edges[static_cast<std::size_t>(ids[i])];
       const bool upward = e.winding == -sign;
-      const int32_t other = ids[upward ? (i + 1 == n ? 0 : i + 1) : (i == 0 ? n - 1 : i - 1)];
-      if (other >= 0 && edges[static_cast<std::size_t>(other)].winding == e.winding) e.above = other;
+      const int32_t next = ids[i + 1 == n ? 0 : i + 1], previous = ids[i == 0 ? n - 1 : i - 1];
+      e.atTop = upward ? next : previous;
+      e.atBottom = upward ? previous : next;
+      if (e.atTop >= 0 && edges[static_cast<std::size_t>(e.atTop)].winding == e.winding) e.above = e.atTop;
+      e.rowLoop = inOneRow;
     }
   });
   bucketByFirst(
@@ -509,6 +517,172 @@ void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double
     ys.erase(std::unique(ys.begin(), ys.end()), ys.end());
   }
   for (std::size_t b = 0; b + 1 < ys.size(); ++b) coverBand(active, ys[b], ys[b + 1], width, scratch);
+}
+
+// Whether two parts of a row's edges meet (cross, touch or overlap), decided on their bounding boxes
+// and orientations; collinear parts with overlapping boxes count as meeting. Used only to prove that
+// parts do not meet, so an answer of "meet" where they do not merely sends the row to coverRow.
+bool partsMeet(const CoverageRowPiece& p, const CoverageRowPiece& q) {
+  if (std::max(p.ua, p.ub) < std::min(q.ua, q.ub) || std::max(q.ua, q.ub) < std::min(p.ua, p.ub))
+    return false;
+  if (p.vb < q.va || q.vb < p.va) return false;
+  const auto orient = [](double ax, double ay, double bx, double by, double cx, double cy) {
+    return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax);
+  };
+  const auto apart = [](double s, double t) { return (s > 0.0 && t > 0.0) || (s < 0.0 && t < 0.0); };
+  if (apart(orient(q.ua, q.va, q.ub, q.vb, p.ua, p.va), orient(q.ua, q.va, q.ub, q.vb, p.ub, p.vb)))
+    return false;
+  return !apart(orient(p.ua, p.va, p.ub, p.vb, q.ua, q.va), orient(p.ua, p.va, p.ub, p.vb, q.ub, q.vb));
+}
+
+// The winding just inside one of the row's lines (its bottom, y0, or its top, y1), left to right over
+// one cluster's crossings of it, starting from `winding` left of the cluster: false if it leaves
+// {0, 1} anywhere, else the winding right of the cluster in `winding`. Crossings at the same u and
+// slope (coincident parts) are summed before the test; at the same u they are ordered by the u they
+// reach just inside the row.
+bool lineWindings(std::vector<LineCrossing>& line, int32_t& winding) {
+  sortNearlySortedBy(line, [](const LineCrossing& a, const LineCrossing& b) {
+    return a.u < b.u || (a.u == b.u && a.slope < b.slope);
+  });
+  for (std::size_t i = 0; i < line.size();) {
+    const std::size_t group = i;
+    do {
+      winding += line[i].winding;
+      ++i;
+    } while (i < line.size() && line[i].u == line[group].u && line[i].slope == line[group].slope);
+    if (winding < 0 || winding > 1) return false;
+  }
+  return true;
+}
+
+// The common row, decided without cutting it (see rasterize.h, "clusters"). The parts of the active
+// edges in the row, in the active list's order, fall into clusters of touching u ranges, each strictly
+// right of every cluster before it, so parts of different clusters never meet and the winding between
+// clusters is the same at every y of the row. A cluster is accepted when the count stays 0 or 1
+// everywhere inside it:
+// - a chain: its parts have one winding and form one chain from the row's bottom to its top (one part
+//   starts at the bottom, one ends at the top, every part that ends inside the row is continued by
+//   the loop's next edge, so every part that starts inside is such a continuation). At every y one
+//   part is crossed, so the count is the one left of it or that plus the winding;
+// - otherwise (local extremes of loops inside the row, several chains): no two parts meet except loop
+//   neighbours at their shared vertex, no loop lies inside the row, and every part that ends inside
+//   the row is continued there by its loop neighbour. Then every region of the row between the parts
+//   touches the row's bottom or top line (a region that touches neither would be enclosed by parts
+//   alone, that is by a whole loop inside the row), so checking the counts along both lines checks
+//   every region.
+// Then every part is a boundary of the positive region and accumulates with its own winding: a chain
+// in chain order, as coverRow would for the same row (the same bytes), any other cluster in the active
+// list's order. Returns false, having accumulated nothing, for any other row.
+// Adds cluster `b`, which follows `a` in the row's pieces, to `a`.
+void mergeClusters(RowCluster& a, const RowCluster& b) {
+  if (a.bottoms == 0) a.head = b.head;
+  a.end = b.end;
+  a.lo = std::min(a.lo, b.lo);
+  a.hi = std::max(a.hi, b.hi);
+  a.bottoms += b.bottoms;
+  a.tops += b.tops;
+  a.inside += b.inside;
+  if (a.winding != b.winding) a.winding = 0;
+  a.continued = a.continued && b.continued;
+}
+
+bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> active, double y0, double y1,
+                       uint32_t width, RasterScratch& scratch) {
+  const auto edgeAt = [edges, active](uint32_t k) -> const CoverageEdge& { return edges[active[k].index]; };
+  std::vector<CoverageRowPiece>& pieces = scratch.rowPieces;
+  std::vector<RowCluster>& clusters = scratch.clusters;
+  pieces.clear();
+  clusters.clear();
+  for (uint32_t k = 0; k < active.size(); ++k) {
+    const CoverageEdge& e = edgeAt(k);
+    if (e.rowLoop) return false;
+    const double va = std::max(e.v0, y0), vb = std::min(e.v1, y1);
+    if ((va > y0 && e.atBottom < 0) || (vb < y1 && e.atTop < 0)) return false;  // a horizontal neighbour
+    const double ua = edgeU(e, va), ub = edgeU(e, vb);
+    const auto index = static_cast<uint32_t>(pieces.size());
+    RowCluster part{index,
+                    index + 1,
+                    index,
+                    std::min(ua, ub),
+                    std::max(ua, ub),
+                    va == y0 ? 1 : 0,
+                    vb == y1 ? 1 : 0,
+                    (va > y0 ? 1 : 0) - (vb < y1 ? 1 : 0),
+                    e.winding,
+                    vb == y1 || e.above >= 0};
+    // The part joins the last cluster when it touches it, and that one the clusters before it while they
+    // touch (the active list is sorted by u at the row's bottom, not by the parts' u ranges).
+    if (!clusters.empty() && part.lo <= clusters.back().hi) {
+      mergeClusters(clusters.back(), part);
+      while (clusters.size() > 1 && clusters.back().lo <= clusters[clusters.size() - 2].hi) {
+        mergeClusters(clusters[clusters.size() - 2], clusters.back());
+        clusters.pop_back();
+      }
+    } else {
+      clusters.push_back(part);
+    }
+    scratch.pieceOfEdge[e.id] = index;
+    pieces.push_back({ua, ub, va, vb, -1, k, false});
+  }
+  if (pieces.empty()) return false;
+
+  int32_t winding = 0;  // left of the cluster
+  std::vector<LineCrossing>& line = scratch.lineCrossings;
+  bool extremes = false;
+  for (const RowCluster& c : clusters) {
+    if (c.chain()) {
+      const int32_t s = c.winding;
+      if (winding != (s > 0 ? 0 : 1)) return false;
+      winding += s;
+      continue;
+    }
+    for (uint32_t a = c.begin; a < c.end; ++a) {
+      const CoverageEdge& e = edgeAt(pieces[a].edge);
+      for (uint32_t b = a + 1; b < c.end; ++b) {
+        const CoverageEdge& f = edgeAt(pieces[b].edge);
+        if (e.atTop == static_cast<int32_t>(f.id) || e.atBottom == static_cast<int32_t>(f.id)) continue;
+        if (partsMeet(pieces[a], pieces[b])) return false;
+      }
+    }
+    int32_t bottom = winding, top = winding;
+    line.clear();
+    for (uint32_t a = c.begin; a < c.end; ++a)
+      if (pieces[a].va == y0)
+        line.push_back({pieces[a].ua, edgeAt(pieces[a].edge).slope, edgeAt(pieces[a].edge).winding});
+    if (!lineWindings(line, bottom)) return false;
+    line.clear();
+    for (uint32_t a = c.begin; a < c.end; ++a)
+      if (pieces[a].vb == y1)
+        line.push_back({pieces[a].ub, -edgeAt(pieces[a].edge).slope, edgeAt(pieces[a].edge).winding});
+    if (!lineWindings(line, top) || top != bottom) return false;
+    winding = bottom;
+    extremes = true;
+  }
+  if (extremes) ++scratch.extremeRows;
+
+  double* cells = scratch.cells.data();
+  const double w = static_cast<double>(width);
+  const auto cell = [w](double u) { return u <= 0.0 ? 0u : static_cast<uint32_t>(std::min(u, w)); };
+  for (const RowCluster& c : clusters) {
+    if (c.chain()) {
+      uint32_t k = c.head;
+      const double sign = edgeAt(pieces[k].edge).winding > 0 ? 1.0 : -1.0;
+      for (;;) {
+        const CoverageRowPiece& p = pieces[k];
+        addBoundarySegment(p.ua, p.ub, sign * (p.vb - p.va), width, cells);
+        if (p.vb >= y1) break;
+        k = scratch.pieceOfEdge[static_cast<std::size_t>(edgeAt(p.edge).above)];
+      }
+    } else {
+      for (uint32_t k = c.begin; k < c.end; ++k) {
+        const CoverageRowPiece& p = pieces[k];
+        const double sign = edgeAt(p.edge).winding > 0 ? 1.0 : -1.0;
+        addBoundarySegment(p.ua, p.ub, sign * (p.vb - p.va), width, cells);
+      }
+    }
+    scratch.spans.push_back({cell(c.lo), cell(c.hi) + 1});
+  }
+  return true;
 }
 
 // One pixel row [y0, y1] (see rasterize.h): the active edges' parts in the row are linked, vertex to
@@ -780,7 +954,6 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   buildCoverageTable(sets, grid, scratch);
   scratch.cells.assign(static_cast<std::size_t>(width) + 2, 0.0);
   double* cells = scratch.cells.data();
-  std::vector<CoverageEdge>& active = scratch.coverageActive;
   std::vector<CellSpan>& spans = scratch.spans;
   const uint8_t* table = transfer ? transfer->table : nullptr;
   const auto valueOf = [table](double a) {
@@ -789,22 +962,37 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     return table ? table[v] : v;
   };
 
+  // Active edges: those overlapping row j, as u at the row's bottom and their index in coverageBucketed,
+  // sorted by u (nearly sorted from the row below), so that the chains are too.
+  const CoverageEdge* edges = scratch.coverageBucketed.data();
+  std::vector<ActiveKey>& active = scratch.activeKeys;
+  active.clear();
   for (uint32_t j = 0; j < height; ++j) {
-    // Active edges: those overlapping row j, sorted by u at the row's bottom.
     std::size_t kept = 0;
     for (std::size_t i = 0; i < active.size(); ++i)
-      if (active[i].endRow > j) active[kept++] = active[i];
+      if (edges[active[i].index].endRow > j) active[kept++] = active[i];
     active.resize(kept);
-    active.insert(active.end(), scratch.coverageBucketed.begin() + scratch.coverageRowStart[j],
-                  scratch.coverageBucketed.begin() + scratch.coverageRowStart[j + 1]);
+    for (uint32_t i = scratch.coverageRowStart[j]; i < scratch.coverageRowStart[j + 1]; ++i)
+      active.push_back({0.0, i});
     if (active.empty()) continue;
-    // Sorted by u at the row's bottom (nearly sorted from the row below), so that the chains are too.
-    for (CoverageEdge& e : active) e.x = edgeU(e, j);
-    sortNearlySorted(active, [](const CoverageEdge& e) { return e.x; });
+    bool sorted = true;
+    for (std::size_t i = 0; i < active.size(); ++i) {
+      active[i].x = edgeU(edges[active[i].index], j);
+      if (i > 0 && active[i].x < active[i - 1].x) sorted = false;
+    }
+    if (!sorted) sortNearlySorted(active, [](const ActiveKey& k) { return k.x; });
 
     spans.clear();
     const double y0 = j, y1 = j + 1.0;
-    coverRow(active, y0, y1, width, scratch);
+    if (!scratch.alwaysBanded && coverClusteredRow(edges, active, y0, y1, width, scratch)) {
+      ++scratch.clusteredRows;
+    } else {
+      ++scratch.bandedRows;
+      std::vector<CoverageEdge>& rowEdges = scratch.coverageActive;
+      rowEdges.resize(active.size());
+      for (std::size_t i = 0; i < active.size(); ++i) rowEdges[i] = edges[active[i].index];
+      coverRow(rowEdges, y0, y1, width, scratch);
+    }
     if (spans.empty()) continue;
 
     // The row: prefix sums over the touched cells, constant runs between them.

@@ -26,12 +26,23 @@
 //   crosses, (signed) dy times the part of the pixel right of it, split over the pixel and its right
 //   neighbour as area and cover (the accumulation of scanline font rasterizers); a prefix sum along the
 //   row then gives every pixel's covered area, so the cost is the edge pixels plus the runs between
-//   them, which are filled, and dark pixels are never touched. Fast path (most rows): when the row's
-//   edges link, vertex to vertex, into chains that each run from the row's bottom to its top with one
-//   winding, and neighbouring chains (ordered at the bottom) never swap sides (checked at every vertex
-//   of either), the order is the same at every y of the row: the boundary is decided once per chain
-//   and no sub-bands are needed (chains that touch or coincide are fine: the +1/-1 steps of two
-//   neighbours add up to the step across both). Any other row takes the sub-bands.
+//   them, which are filled, and dark pixels are never touched.
+//   Clusters (most rows, no cutting): where the count is 0 or 1 everywhere in the row, every edge is a
+//   boundary and accumulates with its own winding, nothing to decide. The row's edge parts are grouped
+//   into clusters of touching u ranges (parts of different clusters never meet, so the count between
+//   clusters is the same at every y); a cluster is proven to keep the count in {0, 1} either as one
+//   chain of one winding from the row's bottom to its top, or, for clusters holding local extremes of
+//   the loops, by checking that no two parts meet except loop neighbours at their shared vertex, that no
+//   loop lies inside the row, and that the count stays in {0, 1} along the row's bottom and top lines
+//   (every region between the parts then touches one of those lines). A row where any of this fails
+//   (overlapping loops, crossings, a horizontal edge inside the row, a loop inside one row) takes the
+//   banded path below.
+//   Banded path: when the row's edges link, vertex to vertex, into chains that each run from the row's
+//   bottom to its top with one winding, and neighbouring chains (ordered at the bottom) never swap
+//   sides (checked at every vertex of either), the order is the same at every y of the row: the
+//   boundary is decided once per chain and no sub-bands are needed (chains that touch or coincide are
+//   fine: the +1/-1 steps of two neighbours add up to the step across both). Any other row takes the
+//   sub-bands.
 //   Exception, for pathological input only: a band where edges cross and more than 64 edges overlap
 //   (e.g. a self-intersecting loop of thousands of random vertices) is not cut at its crossings, which
 //   would cost O(edges^3) per row, but sampled by 16 lines per pixel height, exact in x (the midpoint
@@ -72,6 +83,9 @@ struct CoverageEdge {
   int32_t winding;    // change of the winding count when crossing it left to right
   uint32_t id;        // index in RasterScratch::coverageEdges
   int32_t above;      // id of the edge of the same loop that continues it upwards from (u1, v1), or -1
+  int32_t atTop;      // id of its loop neighbour at (u1, v1), or -1 (horizontal or not in the table)
+  int32_t atBottom;   // id of its loop neighbour at (u0, v0), or -1
+  bool rowLoop;       // its loop lies inside one pixel row
 };
 
 // An edge's span of one sub-band: u at the bottom, middle and top.
@@ -95,6 +109,31 @@ struct ChainCursor {
   double ua, ub;
   double lo, hi;  // u range of its pieces that meet the band (a superset of its range in the band)
   uint32_t first;
+};
+
+// An edge overlapping the current row: u at the row's bottom (its sort key) and its index.
+struct ActiveKey {
+  double x;
+  uint32_t index;
+};
+
+// Parts [begin, end) of a row's pieces whose u ranges touch (coverClusteredRow): their u range, how
+// many start at the row's bottom (the last one: head) and end at its top, parts starting inside the
+// row minus parts ending inside it, their winding (0 where they differ), and whether every part ending
+// inside the row is continued by the next edge of its chain. They form one chain from the row's bottom
+// to its top when chain() holds.
+struct RowCluster {
+  uint32_t begin, end, head;
+  double lo, hi;
+  int32_t bottoms, tops, inside, winding;
+  bool continued;
+  bool chain() const { return winding != 0 && continued && bottoms == 1 && tops == 1 && inside == 0; }
+};
+
+// A part crossing the bottom or top line of a row: u there, the order of parts at the same u, winding.
+struct LineCrossing {
+  double u, slope;
+  int32_t winding;
 };
 
 // Cells [begin, end] of a row touched by one boundary segment.
@@ -129,7 +168,10 @@ struct RasterScratch {
   std::vector<CoverageEdge> coverageEdges;     // non-horizontal edges overlapping the grid's rows
   std::vector<CoverageEdge> coverageBucketed;  // the same, grouped by first row
   std::vector<uint32_t> coverageRowStart;      // height + 1 offsets into coverageBucketed
-  std::vector<CoverageEdge> coverageActive;    // edges overlapping the current row
+  std::vector<CoverageEdge> coverageActive;    // the same edges, copied for coverRow
+  std::vector<ActiveKey> activeKeys;           // edges overlapping the current row (coverageBucketed)
+  std::vector<RowCluster> clusters;            // clusters of the current row's parts
+  std::vector<LineCrossing> lineCrossings;     // one cluster's crossings of a row line
   std::vector<CoveragePiece> pieces;           // active edges spanning the current sub-band
   std::vector<CoverageRowPiece> rowPieces;     // active edges clipped to the current row
   std::vector<uint32_t> pieceOfEdge;           // row piece of each edge id (valid where it points back)
@@ -140,6 +182,11 @@ struct RasterScratch {
   std::vector<double> bandYs;                  // sub-band limits of the current row
   std::vector<double> cells;                   // area/cover accumulation of the row (width + 2)
   std::vector<CellSpan> spans;                 // cell ranges touched in the row
+  // Tests only: every row of rasterizeCoverage by the banded path (coverRow), none by the clusters.
+  bool alwaysBanded = false;
+  // Rows of rasterizeCoverage done by clusters (of them, rows with a cluster that is not one chain) and
+  // by the banded path, summed over calls.
+  std::size_t clusteredRows = 0, extremeRows = 0, bandedRows = 0;
 };
 
 // Optional transfer applied as the coverage values are written (gamma, threshold, light map), so that
