@@ -1,4 +1,5 @@
 #include "core/raster/rasterize.h"
+#include "io/masks/exr_writer.h"
 #include "io/masks/mask_png.h"
 #include "tests/fixtures/exact_coverage.h"
 
@@ -1026,6 +1027,78 @@ namespace {
 
 // The lit extents the binary rasterizer keeps are tight and exact, survive reuse of the image across
 // layers (with mirroring), and the PNG encoder's extent path gives the same image as the full scan.
+// Every fill of m (MaskImage::fills) is a stretch of its row holding its value, in increasing x, none
+// overlapping.
+void expectFillsDescribePixels(const MaskImage& m) {
+  ASSERT_TRUE(m.hasFills());
+  for (uint32_t r = 0; r < m.height; ++r) {
+    const uint32_t first = m.rowFills[2 * r], count = m.rowFills[2 * r + 1];
+    const uint8_t* row = m.pixels.data() + std::size_t{r} * m.width;
+    for (uint32_t k = first; k < first + count; ++k) {
+      const uint32_t a = m.fills[3 * k], b = m.fills[3 * k + 1], value = m.fills[3 * k + 2];
+      ASSERT_LT(a, b) << "row " << r;
+      ASSERT_LE(b, m.width) << "row " << r;
+      if (k > first) {
+        ASSERT_GE(a, m.fills[3 * k - 2]) << "row " << r << ": fills overlap or are out of order";
+      }
+      for (uint32_t i = a; i < b; ++i) ASSERT_EQ(row[i], value) << "row " << r << " pixel " << i;
+    }
+  }
+}
+
+TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {
+  // Anti-aliased images of wiggly outlines and random loops, mirrored or not, reused from layer to
+  // layer, with a gamma table: their fills hold what the pixels hold, and the PNG and EXR coders, which
+  // jump over them, write the bytes they write without them. A row hook may change values, so it leaves no
+  // fills.
+  std::mt19937 rng(4711);
+  RasterScratch scratch;
+  MaskImage m;
+  std::size_t fills = 0;
+  uint8_t gamma[256];
+  for (int v = 0; v < 256; ++v)
+    gamma[v] = static_cast<uint8_t>(std::lround(255.0 * std::pow(v / 255.0, 0.7)));
+  for (int trial = 0; trial < 40; ++trial) {
+    PixelGrid grid = makeGrid(-0.013, 0.021, 0.25, 90, 80);
+    grid.mirrorX = trial % 2 == 1;
+    grid.mirrorY = trial % 3 == 1;
+    const std::vector<LayerContours> random = randomLayers(rng);
+    const LayerContours wiggly =
+        makeLayer({wigglyLoop(rng, 10, 9.5, 8, 0.1, 300), reversed(wigglyLoop(rng, 10, 9.5, 4, 0.1, 200))});
+    std::vector<ContourSet> sets = {{&wiggly, 1}};
+    if (trial % 4 == 3) sets = {{&random[0], 1}, {&random[1], 1}, {&random[2], -1}};
+    CoverageTransfer transfer;
+    transfer.table = gamma;
+    rasterizeCoverage(sets, grid, m, scratch, nullptr, trial % 5 == 2 ? &transfer : nullptr);
+    expectFillsDescribePixels(m);
+    for (uint32_t r = 0; r < m.height; ++r) fills += m.rowFills[2 * r + 1];
+    std::vector<uint8_t> withFills, withoutFills;
+    encodeMaskPng(m, withFills);
+    MaskImage plain = m;
+    plain.fills.clear();
+    plain.rowFills.clear();
+    encodeMaskPng(plain, withoutFills);
+    EXPECT_EQ(withFills, withoutFills) << "trial " << trial;
+    MaskJob job;
+    job.grid = grid;
+    job.layerCount = 1;
+    job.antiAliased = true;
+    MaskEncodeScratch exrScratch;
+    encodeExrMaskLayer(m, job, 0, 0.1, withFills, exrScratch);
+    encodeExrMaskLayer(plain, job, 0, 0.1, withoutFills, exrScratch);
+    EXPECT_EQ(withFills, withoutFills) << "EXR, trial " << trial;
+  }
+  EXPECT_GT(fills, 1000u);
+  CoverageTransfer hook;
+  hook.row = [](void*, uint32_t, uint32_t begin, uint32_t end, uint8_t* row) {
+    for (uint32_t i = begin; i < end; ++i) row[i] = static_cast<uint8_t>(row[i] / 2);
+  };
+  const LayerContours layer = makeLayer({rect(2, 2, 15, 15)});
+  const std::vector<ContourSet> square = {{&layer, 1}};
+  rasterizeCoverage(square, makeGrid(0, 0, 0.5, 40, 40), m, scratch, nullptr, &hook);
+  EXPECT_FALSE(m.hasFills());
+}
+
 TEST(RasterBinary, LitExtentsAreTightAndPngRoundTrips) {
   std::mt19937 rng(777);
   RasterScratch scratch;

@@ -17,6 +17,9 @@ namespace {
 // O(edges^3) per row when most pairs cross. Above this many edges such a band is sampled instead.
 constexpr std::size_t kMaxExactCrossingEdges = 64;
 constexpr double kSampleLinesPerPixel = 16.0;
+// Shortest constant stretch of an anti-aliased row listed in MaskImage::fills (shorter ones cost the
+// PNG coder less to read than to look up).
+constexpr uint32_t kMinFill = 8;
 // Above this many edges starting on one sample line, they are sorted apart and merged into the active
 // list (advanceTo).
 constexpr uint32_t kMergeIncoming = 32;
@@ -856,6 +859,8 @@ void prepareImage(const PixelGrid& grid, MaskImage& out) {
   }
   out.runs.clear();
   out.rowRuns.clear();
+  out.fills.clear();
+  out.rowFills.clear();
 }
 
 }  // namespace
@@ -967,6 +972,10 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   const CoverageEdge* edges = scratch.coverageBucketed.data();
   std::vector<ActiveKey>& active = scratch.activeKeys;
   active.clear();
+  // The constant stretches between edge pixels, for the coders (MaskImage::fills), unless a row hook
+  // may change the values after they are written.
+  const bool keepFills = !(transfer && transfer->row);
+  if (keepFills) out.rowFills.assign(std::size_t{2} * height, 0);
   for (uint32_t j = 0; j < height; ++j) {
     std::size_t kept = 0;
     for (std::size_t i = 0; i < active.size(); ++i)
@@ -1000,8 +1009,15 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     uint32_t lo = width, hi = 0;  // lit extent, unmirrored
     uint64_t sum = 0;
+    const std::size_t firstFill = out.fills.size();
     const auto fill = [&](uint32_t from, uint32_t to, uint8_t value) {
-      if (from >= to || value == 0) return;
+      if (from >= to) return;
+      if (keepFills && to - from >= kMinFill) {  // in stored order; reversed below when mirrored
+        out.fills.push_back(grid.mirrorX ? width - to : from);
+        out.fills.push_back(grid.mirrorX ? width - from : to);
+        out.fills.push_back(value);
+      }
+      if (value == 0) return;
       std::memset(row + (grid.mirrorX ? width - to : from), value, to - from);
       lo = std::min(lo, from);
       hi = to;
@@ -1030,6 +1046,16 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       next = std::min(end + 1, width);
     }
     fill(next, width, valueOf(covered));
+    if (keepFills && out.fills.size() > firstFill) {
+      if (grid.mirrorX) {
+        for (std::size_t a = firstFill, b = out.fills.size() - 3; a < b; a += 3, b -= 3)
+          std::swap_ranges(out.fills.begin() + static_cast<std::ptrdiff_t>(a),
+                           out.fills.begin() + static_cast<std::ptrdiff_t>(a + 3),
+                           out.fills.begin() + static_cast<std::ptrdiff_t>(b));
+      }
+      out.rowFills[2 * r] = static_cast<uint32_t>(firstFill / 3);
+      out.rowFills[2 * r + 1] = static_cast<uint32_t>((out.fills.size() - firstFill) / 3);
+    }
     if (lo >= hi) continue;
     uint32_t begin = grid.mirrorX ? width - hi : lo, end = grid.mirrorX ? width - lo : hi;
     if (transfer && transfer->row) {

@@ -215,7 +215,9 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
 // Anti-aliased mask: each pixel holds round(255 * covered fraction) of the positive-winding region,
 // computed exactly (see the file comment for the rounding rule), then mapped through `transfer` when
 // given. Same preconditions and output layout as rasterizeBinary, and the same lit extents (tight, dark
-// pixels untouched; only the previous image's lit spans are cleared). When valueSum is given it
+// pixels untouched; only the previous image's lit spans are cleared), plus the fills (MaskImage::fills:
+// the stretches of 8 or more pixels written with one value between edge pixels) unless the transfer
+// has a row hook. When valueSum is given it
 // receives the sum of all pixel values (maskArea without a pass over the image).
 // O(edges + vertices * active edges + edge pixels + lit runs) per call; rows where edges cross cost
 // O(active^2) for finding the crossings.

@@ -570,4 +570,28 @@ size_t runEnd(const uint8_t* row, size_t p, size_t end, uint8_t v) {
   return p;
 }
 
+RowRunScanner::RowRunScanner(const MaskImage& mask, size_t stored)
+    : row_(mask.pixels.data() + stored * mask.width) {
+  if (mask.hasFills()) {
+    fill_ = mask.fills.data() + 3 * size_t{mask.rowFills[2 * stored]};
+    fillsEnd_ = fill_ + 3 * size_t{mask.rowFills[2 * stored + 1]};
+  }
+}
+
+size_t RowRunScanner::runEnd(size_t p, size_t end, uint8_t v) {
+  for (;;) {
+    while (fill_ != fillsEnd_ && fill_[1] <= p) fill_ += 3;
+    if (fill_ != fillsEnd_ && fill_[0] <= p) {  // inside a stretch of one value
+      if (fill_[2] != v) return p;
+      p = fill_[1];
+      if (p >= end) return end;
+      continue;
+    }
+    const size_t limit = fill_ != fillsEnd_ ? std::min<size_t>(fill_[0], end) : end;
+    const size_t e = toposlice::runEnd(row_, p, limit, v);
+    if (e < limit || limit == end) return e;
+    p = limit;  // a stretch starts here
+  }
+}
+
 }  // namespace toposlice

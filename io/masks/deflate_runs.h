@@ -16,6 +16,8 @@
 #include <memory>
 #include <vector>
 
+#include "core/raster/mask_image.h"
+
 namespace toposlice {
 
 // Which Huffman code writeBlock may use: `smallest` (dynamic or fixed, whichever gives fewer bits; the
@@ -90,5 +92,20 @@ class RunAdler32 {
 
 // First position >= p in row[0..end) whose byte differs from v, scanned 8 bytes at a time.
 size_t runEnd(const uint8_t* row, size_t p, size_t end, uint8_t v);
+
+// runEnd over one stored row of a mask, jumping over the row's known constant stretches
+// (MaskImage::fills: the insides of an anti-aliased layer's lit regions) instead of reading them.
+// Successive calls must not go back (p never below the previous call's p).
+class RowRunScanner {
+ public:
+  RowRunScanner(const MaskImage& mask, size_t stored);
+  // First position >= p in [p, end) whose byte differs from v, or end; row[p] must be v.
+  size_t runEnd(size_t p, size_t end, uint8_t v);
+
+ private:
+  const uint8_t* row_;
+  const uint32_t* fill_ = nullptr;  // (begin, end, value) triples of the row not yet passed
+  const uint32_t* fillsEnd_ = nullptr;
+};
 
 }  // namespace toposlice

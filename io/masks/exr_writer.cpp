@@ -46,7 +46,7 @@ const HalfBytes& halfBytes() {
 }
 
 // Pixel runs of stored row `stored`, left to right, as value << 24 | length (length < 2^24), appended
-// to `runs`. With extents, dark pixels are not read.
+// to `runs`. With extents, dark pixels are not read; with fills, the insides of lit regions are not.
 void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& runs) {
   const size_t width = mask.width;
   const uint8_t* row = mask.pixels.data() + stored * width;
@@ -57,9 +57,10 @@ void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& 
     if (begin >= end) begin = end = width;
   }
   if (begin > 0) runs.push_back(static_cast<uint32_t>(begin));
+  RowRunScanner scanner(mask, stored);  // jumps over the fills of an anti-aliased layer
   for (size_t p = begin; p < end;) {
     const uint8_t v = row[p];
-    const size_t e = runEnd(row, p + 1, end, v);
+    const size_t e = scanner.runEnd(p, end, v);
     runs.push_back(uint32_t{v} << 24 | static_cast<uint32_t>(e - p));
     p = e;
   }

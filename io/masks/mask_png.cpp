@@ -115,12 +115,15 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
                  : std::memcmp(row, previous, width) == 0);
     previousBegin = litBegin;
     previousEnd = litEnd;
-    // First position >= p whose byte differs from v, using the extents where they settle it.
+    // First position >= p whose byte differs from v, using the extents where they settle it and the
+    // fills (the insides of an anti-aliased layer's lit regions) without reading them.
+    RowRunScanner scanner(mask, stored);
     auto runFrom = [&](size_t p, uint8_t v) {
       if (!extents) return runEnd(row, p, width, v);
       if (p >= litEnd) return v == 0 ? width : p;   // dark to the end
       if (v == 0 && p < litBegin) return litBegin;  // dark up to the first lit pixel
-      const size_t e = runEnd(row, p, litEnd, v);
+      if (row[p] != v) return p;                    // a run of one (most edge pixels of anti-aliased rows)
+      const size_t e = scanner.runEnd(p, litEnd, v);
       return e == litEnd && v == 0 ? width : e;
     };
     // A dark row is one run of zeros that continues the zeros before it: run matches cost the same
