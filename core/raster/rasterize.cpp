@@ -305,7 +305,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       if (first >= end) continue;
       const int32_t winding = upward ? -sign : sign;
       ids[i] = static_cast<int32_t>(edges.size());
-      edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, 0.0, first, end, winding,
+      edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, first, end, winding,
                                    static_cast<uint32_t>(edges.size()), -1, -1, -1, false});
       vLow = std::min(vLow, v0);
       vHigh = std::max(vHigh, v1);
@@ -558,10 +558,24 @@ bool lineWindings(std::vector<LineCrossing>& line, int32_t& winding) {
   return true;
 }
 
+// Adds cluster `b`, which follows `a` in the row's pieces, to `a`.
+void mergeClusters(RowCluster& a, const RowCluster& b) {
+  if (a.bottoms == 0) a.head = b.head;
+  a.end = b.end;
+  a.lo = std::min(a.lo, b.lo);
+  a.hi = std::max(a.hi, b.hi);
+  a.bottoms += b.bottoms;
+  a.tops += b.tops;
+  a.inside += b.inside;
+  if (a.winding != b.winding) a.winding = 0;
+  a.continued = a.continued && b.continued;
+}
+
 // The common row, decided without cutting it (see rasterize.h, "clusters"). The parts of the active
-// edges in the row, in the active list's order, fall into clusters of touching u ranges, each strictly
-// right of every cluster before it, so parts of different clusters never meet and the winding between
-// clusters is the same at every y of the row. A cluster is accepted when the count stays 0 or 1
+// edges in the row are grouped into clusters: each part joins the last cluster when its u range touches
+// it, and clusters that then touch are merged, so every cluster lies strictly right of the ones before
+// it; parts of different clusters never meet and the winding between clusters is the same at every y
+// of the row. A cluster is accepted when the count stays 0 or 1
 // everywhere inside it:
 // - a chain: its parts have one winding and form one chain from the row's bottom to its top (one part
 //   starts at the bottom, one ends at the top, every part that ends inside the row is continued by
@@ -576,19 +590,6 @@ bool lineWindings(std::vector<LineCrossing>& line, int32_t& winding) {
 // Then every part is a boundary of the positive region and accumulates with its own winding: a chain
 // in chain order, as coverRow would for the same row (the same bytes), any other cluster in the active
 // list's order. Returns false, having accumulated nothing, for any other row.
-// Adds cluster `b`, which follows `a` in the row's pieces, to `a`.
-void mergeClusters(RowCluster& a, const RowCluster& b) {
-  if (a.bottoms == 0) a.head = b.head;
-  a.end = b.end;
-  a.lo = std::min(a.lo, b.lo);
-  a.hi = std::max(a.hi, b.hi);
-  a.bottoms += b.bottoms;
-  a.tops += b.tops;
-  a.inside += b.inside;
-  if (a.winding != b.winding) a.winding = 0;
-  a.continued = a.continued && b.continued;
-}
-
 bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> active, double y0, double y1,
                        uint32_t width, RasterScratch& scratch) {
   const auto edgeAt = [edges, active](uint32_t k) -> const CoverageEdge& { return edges[active[k].index]; };

@@ -77,7 +77,6 @@ struct ContourSet {
 struct CoverageEdge {
   double u0, v0, u1, v1;
   double slope;       // du/dv (0 where it overflows)
-  double x;           // scratch: u at the current row's bottom, to keep the active list nearly sorted
   uint32_t firstRow;  // first pixel row it overlaps
   uint32_t endRow;    // one past the last
   int32_t winding;    // change of the winding count when crossing it left to right
