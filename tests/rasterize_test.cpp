@@ -1027,6 +1027,12 @@ namespace {
 
 // The lit extents the binary rasterizer keeps are tight and exact, survive reuse of the image across
 // layers (with mirroring), and the PNG encoder's extent path gives the same image as the full scan.
+std::vector<uint8_t> pngOf(const MaskImage& m) {
+  std::vector<uint8_t> png;
+  encodeMaskPng(m, png);
+  return png;
+}
+
 // Every fill of m (MaskImage::fills) is a stretch of its row holding its value, in increasing x, none
 // overlapping.
 void expectFillsDescribePixels(const MaskImage& m) {
@@ -1072,12 +1078,10 @@ TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {
     rasterizeCoverage(sets, grid, m, scratch, nullptr, trial % 5 == 2 ? &transfer : nullptr);
     expectFillsDescribePixels(m);
     for (uint32_t r = 0; r < m.height; ++r) fills += m.rowFills[2 * r + 1];
-    std::vector<uint8_t> withFills, withoutFills;
-    encodeMaskPng(m, withFills);
     MaskImage plain = m;
     plain.fills.clear();
     plain.rowFills.clear();
-    encodeMaskPng(plain, withoutFills);
+    std::vector<uint8_t> withFills = pngOf(m), withoutFills = pngOf(plain);
     EXPECT_EQ(withFills, withoutFills) << "trial " << trial;
     MaskJob job;
     job.grid = grid;
@@ -1130,13 +1134,11 @@ TEST(RasterBinary, LitExtentsAreTightAndPngRoundTrips) {
         EXPECT_EQ(reused.litEnd[r], hi) << "row " << r;
       }
     }
-    std::vector<uint8_t> withExtents, withoutExtents;
-    encodeMaskPng(reused, withExtents);
     MaskImage plain = reused;
     plain.litBegin.clear();
     plain.litEnd.clear();
-    encodeMaskPng(plain, withoutExtents);
-    EXPECT_EQ(withExtents, withoutExtents) << "trial " << trial;
+    const std::vector<uint8_t> withExtents = pngOf(reused);
+    EXPECT_EQ(withExtents, pngOf(plain)) << "trial " << trial;
     MaskImage decoded;
     ASSERT_TRUE(decodeMaskPng(withExtents, decoded));
     EXPECT_EQ(decoded.pixels, fresh.pixels);
