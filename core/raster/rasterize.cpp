@@ -665,8 +665,6 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
   if (extremes) ++scratch.extremeRows;
 
   double* cells = scratch.cells.data();
-  const double w = static_cast<double>(width);
-  const auto cell = [w](double u) { return u <= 0.0 ? 0u : static_cast<uint32_t>(std::min(u, w)); };
   for (const RowCluster& c : clusters) {
     if (c.chain()) {
       uint32_t k = c.head;
@@ -684,7 +682,7 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
         addBoundarySegment(p.ua, p.ub, sign * (p.vb - p.va), width, cells);
       }
     }
-    scratch.spans.push_back({cell(c.lo), cell(c.hi) + 1});
+    scratch.spans.push_back(segmentCells(c.lo, c.hi, width));
   }
   return true;
 }
@@ -735,8 +733,6 @@ void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32
 
   std::vector<ChainCursor>& live = scratch.chains;
   double* cells = scratch.cells.data();
-  const double w = static_cast<double>(width);
-  const auto cell = [w](double u) { return u <= 0.0 ? 0u : static_cast<uint32_t>(std::min(u, w)); };
   const auto uAt = [&](uint32_t k, double y) { return edgeU(active[pieces[k].edge], y); };
   for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
     const double ya = cuts[c], yb = cuts[c + 1];
@@ -797,7 +793,7 @@ void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32
         hi = std::max({hi, ua, ub});
         if (pieces[k].vb >= yb) break;
       }
-      scratch.spans.push_back({cell(lo), cell(hi) + 1});
+      scratch.spans.push_back(segmentCells(lo, hi, width));
     }
   }
   sortNearlySorted(scratch.spans, [](const CellSpan& s) { return s.begin; });
