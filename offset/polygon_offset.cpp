@@ -241,8 +241,28 @@ class RawOffset {
     double x = 0, y = 0;     // the crossing of the two moved edges
     double in = 0, out = 0;  // the length of moved edge before and after it that the trim removes
     double edgeOut = 0;      // the original edge after the corner
+    double segOut = 0;       // the moved segment the trim ends on (its "out" is measured along it)
     bool ok = false;
+    uint8_t before = 0, after = 0;  // 1: the point before (after) the detour goes too (a swallowed edge)
   };
+
+  // Where the lines A -> b and a -> B cross: A + s (b - A) = a + u (B - a).
+  struct Crossing {
+    double s = 0, u = 0, cross = 0;
+    bool valid = false;
+  };
+  static Crossing crossing(const IntPoint& A, const IntPoint& b, const IntPoint& a, const IntPoint& B) {
+    Crossing c;
+    const double d1x = static_cast<double>(b.X - A.X), d1y = static_cast<double>(b.Y - A.Y);
+    const double d2x = static_cast<double>(B.X - a.X), d2y = static_cast<double>(B.Y - a.Y);
+    c.cross = d1x * d2y - d1y * d2x;
+    if (!(std::fabs(c.cross) > 0)) return c;
+    const double ex = static_cast<double>(a.X - A.X), ey = static_cast<double>(a.Y - A.Y);
+    c.s = (ex * d2y - ey * d2x) / c.cross;
+    c.u = (ex * d1y - ey * d1x) / c.cross;
+    c.valid = true;
+    return c;
+  }
 
   std::span<const IntPoint> path(std::size_t i) const {
     return std::span<const IntPoint>(points_).subspan(starts_[i], starts_[i + 1] - starts_[i]);
@@ -287,6 +307,7 @@ class RawOffset {
     const std::size_t n = src.size();
     normals_.resize(n);
     for (std::size_t j = 0; j < n; ++j) normals_[j] = unitNormal(src[j], src[j + 1 == n ? 0 : j + 1]);
+    kinds_.resize(n);
     dest_.clear();
     detours_.clear();
     corners_.clear();
@@ -300,6 +321,7 @@ class RawOffset {
     double sinA = nk.x * nj.y - nj.x * nk.y;
     if (std::fabs(sinA * delta_) < 1.0) {
       if (nk.x * nj.x + nj.y * nk.y > 0) {  // nearly straight on: one point, and k stays (as in Clipper)
+        kinds_[j] = kStraight;
         dest_.push_back(moved(p, nk.x * delta_, nk.y * delta_));
         return;
       }
@@ -309,6 +331,7 @@ class RawOffset {
       sinA = -1.0;
     }
     if (sinA * delta_ < 0) {  // concave: through the vertex
+      kinds_[j] = kDetour;
       detours_.push_back(static_cast<uint32_t>(dest_.size()));
       corners_.push_back(static_cast<uint32_t>(j));
       dest_.push_back(moved(p, nk.x * delta_, nk.y * delta_));
@@ -316,6 +339,7 @@ class RawOffset {
       dest_.push_back(moved(p, nj.x * delta_, nj.y * delta_));
     } else {
       const double r = 1 + (nj.x * nk.x + nj.y * nk.y);
+      kinds_[j] = r >= miterBound_ ? kMitre : kSquare;
       if (r >= miterBound_) {  // mitre
         const double q = delta_ / r;
         dest_.push_back(moved(p, (nk.x + nj.x) * q, (nk.y + nj.y) * q));
@@ -343,6 +367,7 @@ class RawOffset {
     }
     // Pass 1: each detour's crossing, trims and reach.
     trims_.assign(detours_.size(), Trim{});
+    const std::size_t n = src.size();
     for (std::size_t t = 0; t < detours_.size(); ++t) {
       const std::size_t i = detours_[t];
       const IntPoint& A = dest_[i == 0 ? m - 1 : i - 1];
@@ -350,22 +375,22 @@ class RawOffset {
       const IntPoint& v = dest_[i + 1];
       const IntPoint& a = dest_[i + 2];
       const IntPoint& B = dest_[i + 3 >= m ? i + 3 - m : i + 3];
+      const std::size_t j = corners_[t];
+      Trim& corner = trims_[t];
+      const Crossing c = crossing(A, b, a, B);
+      if (!(c.s > 0 && c.s < 1 && c.u > 0 && c.u < 1)) {
+        if (n >= 6 && c.valid) corner.ok = swallowed(src, j, i, c, corner);
+        continue;
+      }
       const double d1x = static_cast<double>(b.X - A.X), d1y = static_cast<double>(b.Y - A.Y);
       const double d2x = static_cast<double>(B.X - a.X), d2y = static_cast<double>(B.Y - a.Y);
-      const double cross = d1x * d2y - d1y * d2x;
-      if (!(std::fabs(cross) > 0)) continue;
-      const double ex = static_cast<double>(a.X - A.X), ey = static_cast<double>(a.Y - A.Y);
-      const double s = (ex * d2y - ey * d2x) / cross;  // along A -> b
-      const double u = (ex * d1y - ey * d1x) / cross;  // along a -> B
-      if (!(s > 0 && s < 1 && u > 0 && u < 1)) continue;
       const double len1 = std::sqrt(d1x * d1x + d1y * d1y), len2 = std::sqrt(d2x * d2x + d2y * d2y);
-      Trim& corner = trims_[t];
-      corner.x = static_cast<double>(A.X) + s * d1x;
-      corner.y = static_cast<double>(A.Y) + s * d1y;
-      corner.in = (1 - s) * len1;
-      corner.out = u * len2;
+      corner.x = static_cast<double>(A.X) + c.s * d1x;
+      corner.y = static_cast<double>(A.Y) + c.s * d1y;
+      corner.in = (1 - c.s) * len1;
+      corner.out = c.u * len2;
+      corner.segOut = len2;
       // Every vertex adds at least one point, so A comes from the vertex before and B from the one after.
-      const std::size_t j = corners_[t], n = src.size();
       const IntPoint& before = src[j == 0 ? n - 1 : j - 1];
       const IntPoint& after = src[j + 1 == n ? 0 : j + 1];
       const double bx = static_cast<double>(v.X - before.X), by = static_cast<double>(v.Y - before.Y);
@@ -374,17 +399,26 @@ class RawOffset {
       corner.edgeOut = std::sqrt(ax * ax + ay * ay);
       // 1 unit of slack for the rounding of b and a to whole units.
       const double reach =
-          std::max(std::max(corner.in, corner.out), std::fabs(delta_ * cross) / (len1 * len2)) + 1;
+          std::max(std::max(corner.in, corner.out), std::fabs(delta_ * c.cross) / (len1 * len2)) + 1;
       corner.ok = reach <= edgeIn && reach <= corner.edgeOut;
+      if (!corner.ok && n >= 6) corner.ok = inBand(b, src, j, true) && inBand(a, src, j, false);
     }
-    // Pass 2: two trimmed corners at the ends of one edge share it.
+    // Pass 2: two trimmed corners at the ends of one edge share it; a trim that also removes the point
+    // before or after its detour keeps clear of the detours next to it.
     for (std::size_t t = 0; t < detours_.size(); ++t) {
       const std::size_t next = t + 1 == detours_.size() ? 0 : t + 1;
-      const std::size_t after = detours_[t] + 3;
-      if (next == t || (after >= m ? after - m : after) != detours_[next]) continue;
+      if (next == t) continue;
+      const std::size_t gap = (detours_[next] + m - detours_[t]) % m;
       Trim& here = trims_[t];
       Trim& there = trims_[next];
-      if (here.ok && there.ok && here.out + there.in + 2 > here.edgeOut) here.ok = there.ok = false;
+      if (!here.ok || !there.ok) continue;
+      if (gap == 3) {
+        if (here.out + there.in + 2 > here.edgeOut) here.ok = there.ok = false;
+      } else if ((gap == 4 || gap == 5) && here.after && there.before) {
+        here.ok = there.ok = false;  // both would remove the same point or cut the same segment
+      } else if (gap == 4 && (here.after || there.before)) {
+        if (here.out + there.in + 2 > here.segOut) here.ok = there.ok = false;  // one segment, in order
+      }
     }
     // Pass 3: the loop, each trimmed detour replaced by its crossing.
     trimmed_.resize(m);
@@ -395,18 +429,118 @@ class RawOffset {
       if (!corner.ok) continue;
       const std::size_t i = detours_[t];
       out = std::copy(dest_.begin() + static_cast<std::ptrdiff_t>(from),
-                      dest_.begin() + static_cast<std::ptrdiff_t>(i), out);
+                      dest_.begin() + static_cast<std::ptrdiff_t>(i - corner.before), out);
       *out++ = IntPoint(round(corner.x), round(corner.y));
-      from = i + 3;
+      from = i + 3 + corner.after;
     }
     out = std::copy(dest_.begin() + static_cast<std::ptrdiff_t>(from), dest_.end(), out);
     trimmed_.resize(static_cast<std::size_t>(out - trimmed_.data()));
   }
 
+  // Where a corner's reach does not fit its edges, the small loop a trim removes may still lie where two
+  // sweeps count (docs/DESIGN.md, "Growing by trimmed raw loops"): the edge v -> w after the corner moved
+  // by d sweeps, together with the join at w when it is a mitre (or nearly straight) and the next edge,
+  // a convex region; so does the edge before the corner with its own join and edge, backwards. A loop
+  // whose corners lie in both regions lies in both, where the count is at least 2.
+  //
+  // Whether q lies in the region of the edge from the corner src[j] forward (or backward): in the edge's
+  // frame (s along v -> w, h along delta n), s >= 0 and 0 <= h <= d; beyond w (s > |vw|), where w's join
+  // is a mitre or nearly straight, also within the next edge's moved line and before its end. One unit
+  // (a nanometre) of slack, as for the reach.
+  bool inBand(const IntPoint& q, std::span<const IntPoint> src, std::size_t j, bool forward) const {
+    const std::size_t n = src.size();
+    const auto step = [&](std::size_t k) {
+      return forward ? (k + 1 == n ? 0 : k + 1) : (k == 0 ? n - 1 : k - 1);
+    };
+    const std::size_t w = step(j), x = step(w);
+    const Normal nv = normals_[forward ? j : w], nx = normals_[forward ? w : x];
+    const double d = std::fabs(delta_), sign = delta_ < 0 ? -1.0 : 1.0;
+    const double ex = static_cast<double>(src[w].X - src[j].X), ey = static_cast<double>(src[w].Y - src[j].Y);
+    const double len = std::sqrt(ex * ex + ey * ey);
+    if (!(len > 0)) return false;
+    const double qx = static_cast<double>(q.X - src[j].X), qy = static_cast<double>(q.Y - src[j].Y);
+    const double s = (qx * ex + qy * ey) / len, h = sign * (qx * nv.x + qy * nv.y);
+    if (s < -1 || h < -1 || h > d + 1) return false;
+    if (s <= len) return true;
+    if (kinds_[w] != kMitre && kinds_[w] != kStraight) return false;
+    const double fx = static_cast<double>(src[x].X - src[w].X), fy = static_cast<double>(src[x].Y - src[w].Y);
+    const double flen = std::sqrt(fx * fx + fy * fy);
+    if (!(flen > 0)) return false;
+    const double rx = static_cast<double>(q.X - src[w].X), ry = static_cast<double>(q.Y - src[w].Y);
+    return sign * (rx * nx.x + ry * nx.y) <= d + 1 && (rx * fx + ry * fy) / flen <= flen;
+  }
+
+  bool inBands(const IntPoint& q, std::span<const IntPoint> src, std::size_t j) const {
+    return inBand(q, src, j, true) && inBand(q, src, j, false);
+  }
+
+  static double length(const IntPoint& p, const IntPoint& q) {
+    const double x = static_cast<double>(q.X - p.X), y = static_cast<double>(q.Y - p.Y);
+    return std::sqrt(x * x + y * y);
+  }
+
+  // Whether the segments p0 -> p1 and q0 -> q1 cross or touch.
+  static bool meet(const IntPoint& p0, const IntPoint& p1, const IntPoint& q0, const IntPoint& q1) {
+    const auto side = [](const IntPoint& o, const IntPoint& a, const IntPoint& b) {
+      const double v = static_cast<double>(a.X - o.X) * static_cast<double>(b.Y - o.Y) -
+                       static_cast<double>(a.Y - o.Y) * static_cast<double>(b.X - o.X);
+      return (v > 0) - (v < 0);
+    };
+    return side(p0, p1, q0) * side(p0, p1, q1) <= 0 && side(q0, q1, p0) * side(q0, q1, p1) <= 0;
+  }
+
+  // A detour whose moved edges do not cross on both segments because one of them is swallowed (shorter
+  // than the other edge's reach): the edge before it (A -> b) may cross the piece after the swallowed
+  // edge (B -> C), or the piece before the swallowed edge (Z -> A) the edge after it (a -> B). Then the
+  // five points X, b, v, a, B (or X, A, b, v, a) make a loop that goes, where it is simple and its
+  // corners lie in both regions of inBand. Sets corner.x/y and .before/.after; returns whether it fits.
+  bool swallowed(std::span<const IntPoint> src, std::size_t j, std::size_t i, const Crossing& c,
+                 Trim& corner) const {
+    const std::size_t m = dest_.size(), n = src.size();
+    const std::size_t next = j + 1 == n ? 0 : j + 1, prev = j == 0 ? n - 1 : j - 1;
+    IntPoint loop[5];
+    if (c.u >= 1 && c.s > 0 && c.s < 1 && i >= 1 && i + 4 < m &&
+        (kinds_[next] == kMitre || kinds_[next] == kStraight)) {
+      const IntPoint &A = dest_[i - 1], &B = dest_[i + 3], &C = dest_[i + 4];
+      const Crossing e = crossing(A, dest_[i], B, C);
+      if (!(e.valid && e.s > 0 && e.s < 1 && e.u > 0 && e.u < 1)) return false;
+      corner.x = static_cast<double>(A.X) + e.s * static_cast<double>(dest_[i].X - A.X);
+      corner.y = static_cast<double>(A.Y) + e.s * static_cast<double>(dest_[i].Y - A.Y);
+      corner.after = 1;
+      corner.in = (1 - e.s) * length(A, dest_[i]);
+      corner.segOut = length(B, C);
+      corner.out = e.u * corner.segOut;
+      loop[1] = dest_[i], loop[2] = dest_[i + 1], loop[3] = dest_[i + 2], loop[4] = B;
+    } else if (c.s <= 0 && c.u > 0 && c.u < 1 && i >= 2 && i + 3 < m &&
+               (kinds_[prev] == kMitre || kinds_[prev] == kStraight)) {
+      const IntPoint &Z = dest_[i - 2], &A = dest_[i - 1], &a = dest_[i + 2], &B = dest_[i + 3];
+      const Crossing e = crossing(Z, A, a, B);
+      if (!(e.valid && e.s > 0 && e.s < 1 && e.u > 0 && e.u < 1)) return false;
+      corner.x = static_cast<double>(Z.X) + e.s * static_cast<double>(A.X - Z.X);
+      corner.y = static_cast<double>(Z.Y) + e.s * static_cast<double>(A.Y - Z.Y);
+      corner.before = 1;
+      corner.in = (1 - e.s) * length(Z, A);
+      corner.segOut = corner.edgeOut = length(a, B);
+      corner.out = e.u * corner.segOut;
+      loop[1] = A, loop[2] = dest_[i], loop[3] = dest_[i + 1], loop[4] = a;
+    } else {
+      return false;
+    }
+    loop[0] = IntPoint(round(corner.x), round(corner.y));
+    for (const IntPoint& q : loop)
+      if (!inBands(q, src, j)) return false;
+    for (int e = 0; e < 5; ++e)  // simple: no two edges that are not neighbours meet
+      for (int f = e + 2; f < 5; ++f)
+        if (!(e == 0 && f == 4) && meet(loop[e], loop[e + 1], loop[f], loop[(f + 1) % 5])) return false;
+    return true;
+  }
+
+  static constexpr uint8_t kStraight = 0, kDetour = 1, kMitre = 2, kSquare = 3;
   double delta_ = 0, miterBound_ = 0.5;
   std::vector<IntPoint> points_;
   std::vector<uint32_t> starts_{0};
   std::vector<Normal> normals_;
+  std::vector<uint8_t> kinds_;  // each source vertex's join: kStraight, kDetour, kMitre or kSquare
   Path dest_, trimmed_;
   std::vector<uint32_t> detours_;  // where each concave corner's three points start in dest_
   std::vector<uint32_t> corners_;  // and the source vertex of each

@@ -22,7 +22,10 @@
 //   cross (a concave corner when growing, a convex one when shrinking) trimmed where it fits: the
 //   detour through the corner is replaced by the crossing of its two moved edges (rounded to a
 //   nanometre), which leaves the positive-winding region as it was (docs/DESIGN.md, "Growing by trimmed
-//   raw loops"; shrinking a clean region is growing its complement). The union of loops that no longer
+//   raw loops"; shrinking a clean region is growing its complement). Where a corner's trims do not fit
+//   (short edges), the trim still goes where the small loop it removes lies in the bands that the edges
+//   on both sides sweep (with their mitred joins and next edges), and a short edge swallowed by its
+//   neighbours' moved edges goes with it (the same section). The union of loops that no longer
 //   cross at every such corner costs a fraction of ClipperOffset's. The region is ClipperOffset's
 //   wherever the input's count is never negative (its points can differ where Clipper rounds a
 //   crossing of its own); where it is negative somewhere, the positive part grows alone, which

@@ -354,6 +354,49 @@ TEST(PolygonOffset, GrowingOrShrinkingRandomOutlinesGivesClipperOffsetsRegion) {
   EXPECT_EQ(shrinks, 4000u);
 }
 
+// Jagged outlines, 3,000 of them: circles of 40 to 400 vertices whose radii and angular steps jitter by
+// about the offset distance, so that edges are as short as the distance and concave and convex corners
+// alternate (as on a dense mesh's layers, where most trims do not fit their edges and are decided by the
+// edges' swept bands). Grown or shrunk, the region is ClipperOffset's wherever the count is never
+// negative.
+TEST(PolygonOffset, JaggedOutlinesGiveClipperOffsetsRegion) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uniform(0, 1);
+  std::size_t compared = 0;
+  for (int trial = 0; trial < 3000; ++trial) {
+    const int n = 40 + (trial * 37) % 360;
+    const double d = (trial % 5 == 0 ? 0.002 : 0.01) + (trial % 3 == 0 ? 0.3 : 0.05) * uniform(rng);
+    const double jitter = d * (0.2 + 2 * uniform(rng));
+    std::vector<Point2d> points;
+    for (int i = 0; i < n; ++i) {
+      const double a = 2 * std::numbers::pi * (i + 0.9 * uniform(rng)) / n;
+      const double r = 1 + jitter * (uniform(rng) - 0.5);
+      points.push_back({r * std::cos(a), r * std::sin(a)});
+    }
+    LayerContours shape;
+    if (trial % 2) {  // as a hole in a box
+      addRect(shape, -3, -3, 3, 3);
+      std::reverse(points.begin(), points.end());
+    }
+    addLoop(shape, points);
+    ClipperLib::Paths negative;
+    ClipperLib::Clipper clipper;
+    clipper.AddPaths(toPaths(shape), ClipperLib::ptSubject, true);
+    clipper.Execute(ClipperLib::ctUnion, negative, ClipperLib::pftNegative, ClipperLib::pftNegative);
+    if (!negative.empty()) continue;
+    for (const double sd : {d, -d}) {
+      const ContourSet set{&shape, 1};
+      LayerContours offset;
+      correctLayer({&set, 1}, {sd, 0, 0}, 0.0, offset);
+      const LayerContours reference = clipperOffset(shape, sd);
+      ASSERT_LE(differenceArea(offset, reference), 2e-6 * std::max(perimeter(reference), 1e-3))
+          << "trial " << trial << ", d " << sd;
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 5000u);
+}
+
 // Concave corners are trimmed where their trims fit: an L grown by 0.1 is the grown L, six points, not
 // a loop with a detour through its inner corner. Where the trims do not fit (the comb's notches at
 // 0.3), the detour stays.
@@ -376,6 +419,36 @@ TEST(PolygonOffset, ConcaveCornersAreTrimmedWhereTheTrimsFit) {
   EXPECT_EQ(raw.points.size(), comb.points.size()) << "every corner trimmed";
   ASSERT_TRUE(rawCorrectedLoops({&combSet, 1}, {0.3, 0, 0}, 0.0, raw));
   EXPECT_GT(raw.points.size(), comb.points.size() + 20) << "the notches' detours stay";
+}
+
+// A concave corner whose next edge is shorter than the corner's reach is still trimmed where the bands
+// swept by the edges on either side (with the convex join after the short edge and the edge after it)
+// hold the small loop the trim removes; and where the short edge is swallowed (the moved edges before and
+// after the corner do not meet on it), the edge before meets the one after the short edge, and the loop
+// through the corner and the swallowed edge goes. Both regions are ClipperOffset's.
+TEST(PolygonOffset, ShortEdgesAfterConcaveCornersAreTrimmedWhereTheSweptBandsHoldTheLoop) {
+  const double t = 10 * std::numbers::pi / 180;
+  const std::vector<std::vector<Point2d>> outlines{
+      {{0, 0}, {4, 0}, {4, 1}, {1.2, 1}, {1.2, 1.05}, {1, 1.05}, {1, 4}, {0, 4}},  // a 0.05 step
+      {{0, 0},
+       {4, 0},
+       {4, 1},
+       {1.2, 1},
+       {1.2, 1.01},
+       {1.2 - 3 * std::sin(t), 1.01 + 3 * std::cos(t)},
+       {0, 1.01 + 3 * std::cos(t)}}};  // a 0.01 edge, then a slight left turn: swallowed (and gone) at 0.1
+  for (std::size_t o = 0; o < outlines.size(); ++o) {
+    LayerContours shape;
+    addLoop(shape, outlines[o]);
+    const ContourSet set{&shape, 1};
+    LayerContours raw, grown;
+    ASSERT_TRUE(rawCorrectedLoops({&set, 1}, {0.1, 0, 0}, 0.0, raw));
+    EXPECT_EQ(raw.points.size(), outlines[o].size() - o) << "outline " << o << ": no detour left";
+    correctLayer({&set, 1}, {0.1, 0, 0}, 0.0, grown);
+    const LayerContours reference = clipperGrown(shape, 0.1);
+    EXPECT_LE(differenceArea(grown, reference), 2e-6 * perimeter(reference)) << "outline " << o;
+    EXPECT_LE(differenceArea(raw, reference), 2e-6 * perimeter(reference)) << "outline " << o;
+  }
 }
 
 // The masks' raw loops (built straight from the layer's points) united are correctLayer's polygons
