@@ -723,6 +723,41 @@ TEST(RasterCoverage, ClusteredRowsEqualBandedRowsOnOverlappingWigglyLoops) {
   EXPECT_GT(banded, 100u);
 }
 
+TEST(RasterCoverage, OverlappingPartsSideBySideKeepTheirPixelsAlone) {
+  // Two parts in the same rows, each made of two dense outlines that cross each other all along (rows
+  // with crossings and counts of 2, more edges than a band is cut exactly for, so their clusters take the
+  // banded path and are sampled): every pixel of the pair is the pixel of the part alone, as a part on a
+  // plate must be the part sliced alone. (When a banded row was cut and sampled over all of its edges,
+  // the other part's vertices changed the part's sub-bands and so its sample lines.)
+  std::mt19937 rng(4242);
+  std::size_t banded = 0;
+  for (int trial = 0; trial < 6; ++trial) {
+    const PixelGrid grid = makeGrid(0, 0, 0.5, 90, 30);
+    const int n = 1500 + 300 * trial;
+    const LayerContours left =
+        makeLayer({wigglyLoop(rng, 11, 15, 9, 0.3, n), wigglyLoop(rng, 11, 15, 9, 0.3, n)});
+    const LayerContours right =
+        makeLayer({wigglyLoop(rng, 34, 15, 9, 0.3, n), wigglyLoop(rng, 34, 15, 9, 0.3, n),
+                   reversed(wigglyLoop(rng, 34, 15, 4, 0.1, n / 4))});
+    RasterScratch scratch;
+    MaskImage both, a, b;
+    const std::vector<ContourSet> pair = {{&left, 1}, {&right, 1}};
+    rasterizeCoverage(pair, grid, both, scratch);
+    banded += scratch.bandedRows;
+    const ContourSet leftAlone{&left, 1}, rightAlone{&right, 1};
+    rasterizeCoverage({&leftAlone, 1}, grid, a, scratch);
+    rasterizeCoverage({&rightAlone, 1}, grid, b, scratch);
+    std::size_t lit = 0;
+    for (std::size_t p = 0; p < both.pixels.size(); ++p) {
+      ASSERT_EQ(std::min(a.pixels[p], b.pixels[p]), 0) << "trial " << trial << ": the parts overlap";
+      ASSERT_EQ(both.pixels[p], std::max(a.pixels[p], b.pixels[p])) << "trial " << trial << " pixel " << p;
+      lit += both.pixels[p] != 0;
+    }
+    EXPECT_GT(lit, 1000u);
+  }
+  EXPECT_GT(banded, 100u);
+}
+
 TEST(RasterCoverage, OverlapsAndTouchingLoopsLeaveTheClusters) {
   // Configurations whose count leaves {0, 1} or whose loops meet, each next to plain rows: they must be
   // exact (the oracle) and equal to the banded path whichever path takes them.

@@ -280,6 +280,7 @@ double edgeU(const CoverageEdge& e, double v) {
 void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid, RasterScratch& scratch) {
   std::vector<CoverageEdge>& edges = scratch.coverageEdges;
   edges.clear();
+  scratch.flatReach.clear();
   const uint32_t height = grid.height;
   const double inv = 1.0 / grid.pixel;
   const double top = static_cast<double>(height);
@@ -307,6 +308,8 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       ids[i] = static_cast<int32_t>(edges.size());
       edges.push_back(CoverageEdge{u0, v0, u1, v1, slope, first, end, winding,
                                    static_cast<uint32_t>(edges.size()), -1, -1, -1, false});
+      scratch.flatReach.push_back(
+          {std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()});
       vLow = std::min(vLow, v0);
       vHigh = std::max(vHigh, v1);
     }
@@ -323,6 +326,25 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       e.atBottom = upward ? previous : next;
       if (e.atTop >= 0 && edges[static_cast<std::size_t>(e.atTop)].winding == e.winding) e.above = e.atTop;
       e.rowLoop = inOneRow;
+      // Horizontal neighbours: the u range of the horizontal edges that follow the edge's ends (they
+      // join the edge to the loop's next non-horizontal edge across that range; see coverRowByClusters).
+      std::array<double, 2>& reach = scratch.flatReach[static_cast<std::size_t>(ids[i])];
+      const auto flat = [&](std::size_t k) {
+        const Point2d a = gridPoint(loop[k], grid.transposed),
+                      b = gridPoint(loop[k + 1 == n ? 0 : k + 1], grid.transposed);
+        return (a.y - grid.y0) * inv == (b.y - grid.y0) * inv;
+      };
+      const auto extend = [&](std::size_t k) {
+        const double u = (gridPoint(loop[k], grid.transposed).x - grid.x0) * inv;
+        reach[0] = std::min(reach[0], u);
+        reach[1] = std::max(reach[1], u);
+      };
+      for (std::size_t k = i + 1 == n ? 0 : i + 1, steps = 0; steps < n && flat(k);
+           k = k + 1 == n ? 0 : k + 1, ++steps)
+        extend(k + 1 == n ? 0 : k + 1);
+      for (std::size_t k = i == 0 ? n - 1 : i - 1, steps = 0; steps < n && flat(k);
+           k = k == 0 ? n - 1 : k - 1, ++steps)
+        extend(k);
     }
   });
   bucketByFirst(
@@ -410,8 +432,8 @@ CellSpan segmentCells(double ua, double ub, uint32_t width) {
 // Accumulates the boundary of the positive-winding region over the sub-band [ya, yb], whose pieces
 // (sorted by um) neither start, end nor cross inside it.
 void accumulateBand(std::span<const CoveragePiece> pieces, double dy, uint32_t width, double* cells,
-                    std::vector<CellSpan>& spans) {
-  int32_t winding = 0;
+                    std::vector<CellSpan>& spans, int32_t winding0) {
+  int32_t winding = winding0;
   std::size_t i = 0;
   while (i < pieces.size()) {
     const std::size_t group = i;
@@ -442,7 +464,7 @@ void fillPieces(std::span<const CoverageEdge> active, double ya, double yb,
 
 // One sub-band of a row: finds crossings of its pieces (then cuts it at each crossing) and accumulates.
 void coverBand(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
-               RasterScratch& scratch) {
+               RasterScratch& scratch, int32_t winding0) {
   std::vector<CoveragePiece>& pieces = scratch.pieces;
   fillPieces(active, ya, yb, pieces);
   if (pieces.empty()) return;
@@ -451,7 +473,7 @@ void coverBand(std::span<const CoverageEdge> active, double ya, double yb, uint3
     ordered = pieces[k - 1].ua <= pieces[k].ua && pieces[k - 1].ub <= pieces[k].ub;
   double* cells = scratch.cells.data();
   if (ordered) {
-    accumulateBand(pieces, yb - ya, width, cells, scratch.spans);
+    accumulateBand(pieces, yb - ya, width, cells, scratch.spans, winding0);
     return;
   }
   // Edges cross inside the band: cut it at every crossing (pairs whose order differs at an end).
@@ -469,7 +491,7 @@ void coverBand(std::span<const CoverageEdge> active, double ya, double yb, uint3
   cuts.erase(std::unique(cuts.begin(), cuts.end()), cuts.end());
   for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
     fillPieces(active, cuts[c], cuts[c + 1], pieces);
-    accumulateBand(pieces, cuts[c + 1] - cuts[c], width, cells, scratch.spans);
+    accumulateBand(pieces, cuts[c + 1] - cuts[c], width, cells, scratch.spans, winding0);
   }
 }
 
@@ -478,7 +500,7 @@ void coverBand(std::span<const CoverageEdge> active, double ya, double yb, uint3
 // the solid runs are exact in x and weigh the band's height / lines (the midpoint rule in y). Used where
 // too many edges cross for the exact cuts (see rasterize.h).
 void coverBandBySampling(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
-                         RasterScratch& scratch) {
+                         RasterScratch& scratch, int32_t winding0) {
   const auto lines = static_cast<uint32_t>(std::max(1.0, std::ceil(kSampleLinesPerPixel * (yb - ya))));
   const double h = (yb - ya) / lines;
   std::vector<CoveragePiece>& crossings = scratch.pieces;
@@ -495,16 +517,16 @@ void coverBandBySampling(std::span<const CoverageEdge> active, double ya, double
     }
     sortNearlySorted(crossings, [](const CoveragePiece& p) { return p.um; });
     // A run [ua, ub) of height h is a rising boundary at ua and a falling one at ub.
-    accumulateBand(crossings, h, width, cells, scratch.spans);
+    accumulateBand(crossings, h, width, cells, scratch.spans, winding0);
   }
 }
 
 void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double yb, uint32_t width,
-                         RasterScratch& scratch) {
+                         RasterScratch& scratch, int32_t winding0) {
   std::size_t overlapping = 0;
   for (const CoverageEdge& e : active) overlapping += e.v0 < yb && e.v1 > ya ? 1 : 0;
   if (overlapping > kMaxExactCrossingEdges) {
-    coverBandBySampling(active, ya, yb, width, scratch);
+    coverBandBySampling(active, ya, yb, width, scratch, winding0);
     return;
   }
   std::vector<double>& ys = scratch.bandYs;
@@ -519,7 +541,8 @@ void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double
     std::sort(ys.begin() + 1, ys.end() - 1);
     ys.erase(std::unique(ys.begin(), ys.end()), ys.end());
   }
-  for (std::size_t b = 0; b + 1 < ys.size(); ++b) coverBand(active, ys[b], ys[b + 1], width, scratch);
+  for (std::size_t b = 0; b + 1 < ys.size(); ++b)
+    coverBand(active, ys[b], ys[b + 1], width, scratch, winding0);
 }
 
 // Whether two parts of a row's edges meet (cross, touch or overlap), decided on their bounding boxes
@@ -569,14 +592,17 @@ void mergeClusters(RowCluster& a, const RowCluster& b) {
   a.inside += b.inside;
   if (a.winding != b.winding) a.winding = 0;
   a.continued = a.continued && b.continued;
+  a.loop = a.loop || b.loop;
 }
+
+void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32_t width,
+              RasterScratch& scratch, int32_t winding0);
 
 // The common row, decided without cutting it (see rasterize.h, "clusters"). The parts of the active
 // edges in the row are grouped into clusters: each part joins the last cluster when its u range touches
 // it, and clusters that then touch are merged, so every cluster lies strictly right of the ones before
 // it; parts of different clusters never meet and the winding between clusters is the same at every y
-// of the row. A cluster is accepted when the count stays 0 or 1
-// everywhere inside it:
+// of the row. A cluster is accepted when the count stays 0 or 1 everywhere inside it:
 // - a chain: its parts have one winding and form one chain from the row's bottom to its top (one part
 //   starts at the bottom, one ends at the top, every part that ends inside the row is continued by
 //   the loop's next edge, so every part that starts inside is such a continuation). At every y one
@@ -587,11 +613,15 @@ void mergeClusters(RowCluster& a, const RowCluster& b) {
 //   touches the row's bottom or top line (a region that touches neither would be enclosed by parts
 //   alone, that is by a whole loop inside the row), so checking the counts along both lines checks
 //   every region.
-// Then every part is a boundary of the positive region and accumulates with its own winding: a chain
-// in chain order, as coverRow would for the same row (the same bytes), any other cluster in the active
-// list's order. Returns false, having accumulated nothing, for any other row.
-bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> active, double y0, double y1,
-                       uint32_t width, RasterScratch& scratch) {
+// In an accepted cluster every part is a boundary of the positive region and accumulates with its own
+// winding: a chain in chain order, as coverRow would for the same row (the same bytes), any other
+// cluster in the active list's order. Any other cluster (overlapping or crossing loops, a loop inside the
+// row, a count left of it outside {0, 1}, a part next to a horizontal edge inside the row, whose u range
+// then joins the cluster) goes to coverRow with its own edges alone, starting from the count left of it:
+// its pixels do not depend on what else lies in the row (another part of a plate). `allClustered`: no
+// cluster went to coverRow. Returns false (nothing accumulated) for a row without parts.
+bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> active, double y0, double y1,
+                        uint32_t width, RasterScratch& scratch, bool& allClustered) {
   const auto edgeAt = [edges, active](uint32_t k) -> const CoverageEdge& { return edges[active[k].index]; };
   std::vector<CoverageRowPiece>& pieces = scratch.rowPieces;
   std::vector<RowCluster>& clusters = scratch.clusters;
@@ -599,9 +629,7 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
   clusters.clear();
   for (uint32_t k = 0; k < active.size(); ++k) {
     const CoverageEdge& e = edgeAt(k);
-    if (e.rowLoop) return false;
     const double va = std::max(e.v0, y0), vb = std::min(e.v1, y1);
-    if ((va > y0 && e.atBottom < 0) || (vb < y1 && e.atTop < 0)) return false;  // a horizontal neighbour
     const double ua = edgeU(e, va), ub = edgeU(e, vb);
     const auto index = static_cast<uint32_t>(pieces.size());
     RowCluster part{index,
@@ -614,6 +642,15 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
                     (va > y0 ? 1 : 0) - (vb < y1 ? 1 : 0),
                     e.winding,
                     vb == y1 || e.above >= 0};
+    part.loop = e.rowLoop;
+    if ((va > y0 && e.atBottom < 0) || (vb < y1 && e.atTop < 0)) {
+      // A horizontal neighbour inside the row joins this part to another across its u range: both go
+      // into one cluster, which coverRow covers.
+      const std::array<double, 2>& reach = scratch.flatReach[e.id];
+      part.lo = std::min(part.lo, reach[0]);
+      part.hi = std::max(part.hi, reach[1]);
+      part.loop = true;
+    }
     // The part joins the last cluster when it touches it, and that one the clusters before it while they
     // touch (the active list is sorted by u at the row's bottom, not by the parts' u ranges).
     if (!clusters.empty() && part.lo <= clusters.back().hi) {
@@ -632,14 +669,10 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
 
   int32_t winding = 0;  // left of the cluster
   std::vector<LineCrossing>& line = scratch.lineCrossings;
-  bool extremes = false;
-  for (const RowCluster& c : clusters) {
-    if (c.chain()) {
-      const int32_t s = c.winding;
-      if (winding != (s > 0 ? 0 : 1)) return false;
-      winding += s;
-      continue;
-    }
+  // A cluster that is not one chain: no two parts meet except loop neighbours, and the counts along
+  // both lines stay in {0, 1} (from `winding`, the count left of it) and agree right of it.
+  const auto acceptedExtremes = [&](const RowCluster& c) {
+    if (winding < 0 || winding > 1) return false;  // right of a cluster that coverRow covers
     for (uint32_t a = c.begin; a < c.end; ++a) {
       const CoverageEdge& e = edgeAt(pieces[a].edge);
       for (uint32_t b = a + 1; b < c.end; ++b) {
@@ -658,14 +691,33 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
     for (uint32_t a = c.begin; a < c.end; ++a)
       if (pieces[a].vb == y1)
         line.push_back({pieces[a].ub, -edgeAt(pieces[a].edge).slope, edgeAt(pieces[a].edge).winding});
-    if (!lineWindings(line, top) || top != bottom) return false;
-    winding = bottom;
-    extremes = true;
+    return lineWindings(line, top) && top == bottom;
+  };
+  bool extremes = false;
+  allClustered = true;
+  for (RowCluster& c : clusters) {
+    c.left = winding;
+    int32_t net = 0;  // the count's change across the cluster, along the row's bottom line
+    for (uint32_t a = c.begin; a < c.end; ++a)
+      if (pieces[a].va == y0) net += edgeAt(pieces[a].edge).winding;
+    c.accepted = !c.loop && (c.chain() ? winding == (c.winding > 0 ? 0 : 1) : acceptedExtremes(c));
+    allClustered = allClustered && c.accepted;
+    extremes = extremes || (c.accepted && !c.chain());
+    winding += net;
   }
   if (extremes) ++scratch.extremeRows;
 
   double* cells = scratch.cells.data();
+  std::vector<CoverageEdge>& own = scratch.coverageActive;
+  std::vector<uint32_t>& ownStart = scratch.clusterEdgeStart;
+  own.clear();
+  ownStart.clear();
   for (const RowCluster& c : clusters) {
+    if (!c.accepted) {
+      ownStart.push_back(static_cast<uint32_t>(own.size()));
+      for (uint32_t k = c.begin; k < c.end; ++k) own.push_back(edgeAt(pieces[k].edge));
+      continue;
+    }
     if (c.chain()) {
       uint32_t k = c.head;
       const double sign = edgeAt(pieces[k].edge).winding > 0 ? 1.0 : -1.0;
@@ -684,6 +736,16 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
     }
     scratch.spans.push_back(segmentCells(c.lo, c.hi, width));
   }
+  if (allClustered) return true;
+  // coverRow reuses the row's pieces: the clusters it covers were copied out above.
+  ownStart.push_back(static_cast<uint32_t>(own.size()));
+  std::size_t r = 0;
+  for (const RowCluster& c : clusters) {
+    if (c.accepted) continue;
+    coverRow(std::span<const CoverageEdge>(own).subspan(ownStart[r], ownStart[r + 1] - ownStart[r]), y0, y1,
+             width, scratch, c.left);
+    ++r;
+  }
   return true;
 }
 
@@ -693,7 +755,7 @@ bool coverClusteredRow(const CoverageEdge* edges, std::span<const ActiveKey> act
 // bottom; if no two neighbours swap sides (checked at every vertex of either) the boundary is decided
 // once per chain, else the band is cut at every vertex and crossing (coverBandByVertices).
 void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32_t width,
-              RasterScratch& scratch) {
+              RasterScratch& scratch, int32_t winding0) {
   std::vector<CoverageRowPiece>& pieces = scratch.rowPieces;
   std::vector<uint32_t>& starts = scratch.chainStarts;
   pieces.clear();
@@ -773,10 +835,10 @@ void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32
       }
     }
     if (!ordered) {
-      coverBandByVertices(active, ya, yb, width, scratch);
+      coverBandByVertices(active, ya, yb, width, scratch, winding0);
       continue;
     }
-    int32_t winding = 0;
+    int32_t winding = winding0;
     for (const ChainCursor& chain : live) {
       const int32_t next = winding + active[pieces[chain.first].edge].winding;
       const bool boundary = (winding <= 0) != (next <= 0);
@@ -990,14 +1052,15 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
 
     spans.clear();
     const double y0 = j, y1 = j + 1.0;
-    if (!scratch.alwaysBanded && coverClusteredRow(edges, active, y0, y1, width, scratch)) {
-      ++scratch.clusteredRows;
+    bool allClustered = false;
+    if (!scratch.alwaysBanded && coverRowByClusters(edges, active, y0, y1, width, scratch, allClustered)) {
+      ++(allClustered ? scratch.clusteredRows : scratch.bandedRows);
     } else {
       ++scratch.bandedRows;
       std::vector<CoverageEdge>& rowEdges = scratch.coverageActive;
       rowEdges.resize(active.size());
       for (std::size_t i = 0; i < active.size(); ++i) rowEdges[i] = edges[active[i].index];
-      coverRow(rowEdges, y0, y1, width, scratch);
+      coverRow(rowEdges, y0, y1, width, scratch, 0);
     }
     if (spans.empty()) continue;
 

@@ -34,9 +34,10 @@
 //   chain of one winding from the row's bottom to its top, or, for clusters holding local extremes of
 //   the loops, by checking that no two parts meet except loop neighbours at their shared vertex, that no
 //   loop lies inside the row, and that the count stays in {0, 1} along the row's bottom and top lines
-//   (every region between the parts then touches one of those lines). A row where any of this fails
-//   (overlapping loops, crossings, a horizontal edge inside the row, a loop inside one row) takes the
-//   banded path below.
+//   (every region between the parts then touches one of those lines). A cluster where any of this fails
+//   (overlapping loops, crossings, a horizontal edge inside the row, whose u range then joins the
+//   cluster, a loop inside one row) takes the banded path below with its own edges alone, starting from
+//   the count left of it, so its pixels do not depend on other parts in the row (a plate's other parts).
 //   Banded path: when the row's edges link, vertex to vertex, into chains that each run from the row's
 //   bottom to its top with one winding, and neighbouring chains (ordered at the bottom) never swap
 //   sides (checked at every vertex of either), the order is the same at every y of the row: the
@@ -56,6 +57,7 @@
 // height-1-j. Contours may extend beyond the grid; they are clipped, never wrapped.
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <span>
@@ -126,6 +128,9 @@ struct RowCluster {
   double lo, hi;
   int32_t bottoms, tops, inside, winding;
   bool continued;
+  bool loop = false;      // holds a part of a loop that lies inside the row
+  int32_t left = 0;       // the count left of the cluster
+  bool accepted = false;  // the count provably stays in {0, 1}: accumulated without bands
   bool chain() const { return winding != 0 && continued && bottoms == 1 && tops == 1 && inside == 0; }
 };
 
@@ -164,27 +169,29 @@ struct RasterScratch {
   std::vector<uint32_t> lineOfPoint;                    // first sample line at or above each point of a loop
   std::vector<uint8_t> linked;  // per edge: 1 where an edge before it in its chain hands on to it
   // Exact coverage (pixel units: u = (x - x0) / p, v = (y - y0) / p).
-  std::vector<CoverageEdge> coverageEdges;     // non-horizontal edges overlapping the grid's rows
-  std::vector<CoverageEdge> coverageBucketed;  // the same, grouped by first row
-  std::vector<uint32_t> coverageRowStart;      // height + 1 offsets into coverageBucketed
-  std::vector<CoverageEdge> coverageActive;    // the same edges, copied for coverRow
-  std::vector<ActiveKey> activeKeys;           // edges overlapping the current row (coverageBucketed)
-  std::vector<RowCluster> clusters;            // clusters of the current row's parts
-  std::vector<LineCrossing> lineCrossings;     // one cluster's crossings of a row line
-  std::vector<CoveragePiece> pieces;           // active edges spanning the current sub-band
-  std::vector<CoverageRowPiece> rowPieces;     // active edges clipped to the current row
-  std::vector<uint32_t> pieceOfEdge;           // row piece of each edge id (valid where it points back)
-  std::vector<int32_t> loopIds;                // edge ids of one loop while the table is built
-  std::vector<uint32_t> chainStarts;           // fast path: pieces starting inside the row, then chain heads
-  std::vector<double> rowCuts;                 // where chains start or end inside the row
-  std::vector<ChainCursor> chains;             // chains spanning the current band
-  std::vector<double> bandYs;                  // sub-band limits of the current row
-  std::vector<double> cells;                   // area/cover accumulation of the row (width + 2)
-  std::vector<CellSpan> spans;                 // cell ranges touched in the row
+  std::vector<CoverageEdge> coverageEdges;       // non-horizontal edges overlapping the grid's rows
+  std::vector<CoverageEdge> coverageBucketed;    // the same, grouped by first row
+  std::vector<uint32_t> coverageRowStart;        // height + 1 offsets into coverageBucketed
+  std::vector<CoverageEdge> coverageActive;      // the same edges (or a cluster's), copied for coverRow
+  std::vector<uint32_t> clusterEdgeStart;        // where each cluster's edges start in coverageActive
+  std::vector<std::array<double, 2>> flatReach;  // u range of each edge's horizontal neighbours (if any)
+  std::vector<ActiveKey> activeKeys;             // edges overlapping the current row (coverageBucketed)
+  std::vector<RowCluster> clusters;              // clusters of the current row's parts
+  std::vector<LineCrossing> lineCrossings;       // one cluster's crossings of a row line
+  std::vector<CoveragePiece> pieces;             // active edges spanning the current sub-band
+  std::vector<CoverageRowPiece> rowPieces;       // active edges clipped to the current row
+  std::vector<uint32_t> pieceOfEdge;             // row piece of each edge id (valid where it points back)
+  std::vector<int32_t> loopIds;                  // edge ids of one loop while the table is built
+  std::vector<uint32_t> chainStarts;  // fast path: pieces starting inside the row, then chain heads
+  std::vector<double> rowCuts;        // where chains start or end inside the row
+  std::vector<ChainCursor> chains;    // chains spanning the current band
+  std::vector<double> bandYs;         // sub-band limits of the current row
+  std::vector<double> cells;          // area/cover accumulation of the row (width + 2)
+  std::vector<CellSpan> spans;        // cell ranges touched in the row
   // Tests only: every row of rasterizeCoverage by the banded path (coverRow), none by the clusters.
   bool alwaysBanded = false;
-  // Rows of rasterizeCoverage done by clusters (of them, rows with a cluster that is not one chain) and
-  // by the banded path, summed over calls.
+  // Rows of rasterizeCoverage done by clusters alone (of them, rows with a cluster that is not one
+  // chain) and rows where some cluster (or, with alwaysBanded, the row) took the banded path, summed.
   std::size_t clusteredRows = 0, extremeRows = 0, bandedRows = 0;
 };
 
