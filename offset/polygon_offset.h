@@ -69,7 +69,7 @@ std::size_t correctLayer(std::span<const ContourSet> sets, const LayerCorrection
 // positive set, or that shrinks any sets (returns false otherwise, `out` untouched): the trimmed raw
 // offset loops (above; of the sets' union when shrinking), whose positive-winding union (unitePositive)
 // is exactly correctLayer's result, so masks of either are the same region. The rasterizers apply the
-// positive rule themselves, so binary masks need no union. Where a corner's detour stays (its trims do
+// positive rule themselves, so masks need no union. Where a corner's detour stays (its trims do
 // not fit), the loop crosses itself there.
 bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                        LayerContours& out);

@@ -312,10 +312,9 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
         const std::size_t first = partStart[m], end = m + 1 < partCount ? partStart[m + 1] : layer.size();
         s.sets.clear();
         for (std::size_t i = first; i < end; ++i) s.sets.push_back({&layer[i], signs[i]});
-        // A growing correction and binary masks: the part's masks rasterize its raw offset loops, as
-        // the part sliced alone does, and its polygons are those loops united (correctLayer's result).
-        s.rawMasks[m] =
-            masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, layer[first].z, s.raw);
+        // An absolute correction alone: the part's masks rasterize its raw offset loops, as the part
+        // sliced alone does, and its polygons are those loops united (correctLayer's result).
+        s.rawMasks[m] = masks && rawCorrectedLoops(s.sets, correction, layer[first].z, s.raw);
         if (s.rawMasks[m])
           unitePositive(s.raw, layer[first].z, s.corrected);
         else

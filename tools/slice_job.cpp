@@ -744,13 +744,10 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       s.sets.clear();
       for (std::size_t i = 0; i < sliced.size(); ++i)
         s.sets.push_back({&sliced[i], i == 0 || i <= addCount ? 1 : -1});
-      // A correction that only grows, binary masks: the masks rasterize the raw offset loops, whose
-      // positive-winding region is the corrected one (polygon_offset.h), and the polygons, when contour
-      // outputs or the report need them, are those loops united (correctLayer's result, exactly).
-      // (Anti-aliased masks rasterize the polygons: where a corner's detour stays, the coverage
-      // rasterizer cuts the row at its crossing, and the row's sums then round differently with other
-      // parts in the row, so a part on a plate could differ by a level from the part alone.)
-      raw = masks && !maskJob.antiAliased && rawCorrectedLoops(s.sets, correction, sliced[0].z, s.rawLoops);
+      // An absolute correction alone: the masks (binary or anti-aliased) rasterize the raw offset loops,
+      // whose positive-winding region is the corrected one (polygon_offset.h), and the polygons, when
+      // contour outputs or the report need them, are those loops united (correctLayer's result, exactly).
+      raw = masks && rawCorrectedLoops(s.sets, correction, sliced[0].z, s.rawLoops);
       if (!raw)
         correctLayer(s.sets, correction, sliced[0].z, r.corrected[0]);
       else if (polygonsNeeded)
