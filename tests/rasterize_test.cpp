@@ -1,4 +1,5 @@
 #include "core/raster/rasterize.h"
+#include "core/print/corrections.h"
 #include "io/masks/exr_writer.h"
 #include "io/masks/mask_png.h"
 #include "tests/fixtures/exact_coverage.h"
@@ -1019,6 +1020,56 @@ TEST(RasterCoverage, TransferTableAndRowHook) {
   }
   EXPECT_EQ(static_cast<uint64_t>(calls), litRows);
   EXPECT_EQ(sum, expectedSum);
+}
+
+// A light map applied as the values are written equals the map applied to the finished image
+// (applyLightMap), with a gamma table, mirrored or not, on a reused image: the same pixels, tight extents
+// (pixels dimmed to 0 at a row's ends leave it), and the value sum taken before the map.
+TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
+  const LayerContours layer =
+      makeLayer({circle(3.2, 2.9, 2.1, 300), reversed(circle(3.0, 3.0, 1.0, 200)), rect(4.6, 0.3, 6.6, 5.5)});
+  const std::vector<ContourSet> sets = {{&layer, 1}};
+  const std::array<uint8_t, 256> gamma = gammaTable(0.8);
+  RasterScratch scratch;
+  MaskImage m;
+  for (int mirror = 0; mirror < 2; ++mirror) {
+    PixelGrid grid = makeGrid(0, 0, 0.1, 70, 60);
+    grid.mirrorX = mirror == 1;
+    grid.mirrorY = mirror == 1;
+    MaskImage map;
+    map.width = grid.width;
+    map.height = grid.height;
+    map.pixels.resize(std::size_t{grid.width} * grid.height);
+    for (std::size_t p = 0; p < map.pixels.size(); ++p)
+      map.pixels[p] = static_cast<uint8_t>(p % 7 == 0 ? 0 : 90 + (p * 37) % 166);  // some pixels dark
+    CoverageTransfer transfer;
+    transfer.table = gamma.data();
+    uint64_t before = 0, after = 0;
+    rasterizeCoverage(sets, grid, m, scratch, &before, &transfer);
+    const MaskImage unlit = m;
+    MaskImage expected = m;
+    applyLightMap(expected, map);
+    transfer.lightMap = map.pixels.data();
+    rasterizeCoverage(sets, grid, m, scratch, &after, &transfer);
+    ASSERT_EQ(m.pixels, expected.pixels) << "mirror " << mirror;
+    EXPECT_EQ(after, before);
+    EXPECT_TRUE(m.fills.empty());
+    std::size_t dimmedEnds = 0;
+    for (uint32_t r = 0; r < grid.height; ++r) {
+      const uint8_t* row = m.pixels.data() + std::size_t{r} * grid.width;
+      uint32_t first = grid.width, last = 0;
+      for (uint32_t i = 0; i < grid.width; ++i)
+        if (row[i] != 0) first = std::min(first, i), last = i + 1;
+      if (first >= last) {
+        EXPECT_GE(m.litBegin[r], m.litEnd[r]) << r;
+        continue;
+      }
+      EXPECT_EQ(m.litBegin[r], first) << r;
+      EXPECT_EQ(m.litEnd[r], last) << r;
+      dimmedEnds += m.litBegin[r] != unlit.litBegin[r] || m.litEnd[r] != unlit.litEnd[r] ? 1 : 0;
+    }
+    EXPECT_GT(dimmedEnds, 0u);
+  }
 }
 
 TEST(RasterCoverage, PixelAlignedShapesMatchBinary) {

@@ -320,12 +320,14 @@ double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, 
   if (job.antiAliased) {
     // Gamma is applied as the values are written (no second pass); the area is taken after gamma and
     // before the light map, which dims the light, not the part.
+    // The light map dims each value as it is written (only lit pixels are touched).
     uint64_t valueSum = 0;  // maskArea without a pass over the image
     const bool gamma = transfer != nullptr && transfer->gamma;
+    const bool light = transfer != nullptr && !transfer->lightMap.pixels.empty();
     CoverageTransfer coverage;
     coverage.table = gamma ? transfer->gammaTable.data() : nullptr;
-    rasterizeCoverage(sets, job.grid, mask, scratch, &valueSum, gamma ? &coverage : nullptr);
-    if (transfer != nullptr && !transfer->lightMap.pixels.empty()) applyLightMap(mask, transfer->lightMap);
+    coverage.lightMap = light ? transfer->lightMap.pixels.data() : nullptr;
+    rasterizeCoverage(sets, job.grid, mask, scratch, &valueSum, gamma || light ? &coverage : nullptr);
     return static_cast<double>(valueSum) / 255.0 * job.grid.pixel * job.grid.pixel;
   }
   uint64_t lit = 0;

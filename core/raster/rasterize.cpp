@@ -266,6 +266,11 @@ bool usableGrid(const PixelGrid& grid) {
 
 // ---- Exact coverage ----
 
+// A coverage value dimmed by a light map's relative intensity m: round(v * m / 255).
+uint8_t lightValue(uint8_t v, uint8_t m) {
+  return static_cast<uint8_t>((unsigned{v} * m + 127u) / 255u);
+}
+
 // u of edge e at height v, exact at its ends (so consecutive edges of a loop meet exactly) and kept
 // within its u range elsewhere.
 double edgeU(const CoverageEdge& e, double v) {
@@ -1033,7 +1038,8 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   active.clear();
   // The constant stretches between edge pixels, for the coders (MaskImage::fills), unless a row hook
   // may change the values after they are written.
-  const bool keepFills = !(transfer && transfer->row);
+  const uint8_t* light = transfer ? transfer->lightMap : nullptr;
+  const bool keepFills = !(transfer && (transfer->row || light));
   if (keepFills) out.rowFills.assign(std::size_t{2} * height, 0);
   for (uint32_t j = 0; j < height; ++j) {
     std::size_t kept = 0;
@@ -1067,6 +1073,7 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     // The row: prefix sums over the touched cells, constant runs between them.
     const uint32_t r = grid.mirrorY ? height - 1 - j : j;
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
+    const uint8_t* lightRow = light ? light + static_cast<std::size_t>(r) * width : nullptr;
     uint32_t lo = width, hi = 0;  // lit extent, unmirrored
     uint64_t sum = 0;
     const std::size_t firstFill = out.fills.size();
@@ -1078,7 +1085,12 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
         out.fills.push_back(value);
       }
       if (value == 0) return;
-      std::memset(row + (grid.mirrorX ? width - to : from), value, to - from);
+      const uint32_t at = grid.mirrorX ? width - to : from;
+      if (lightRow) {
+        for (uint32_t p = at; p < at + (to - from); ++p) row[p] = lightValue(value, lightRow[p]);
+      } else {
+        std::memset(row + at, value, to - from);
+      }
       lo = std::min(lo, from);
       hi = to;
       sum += static_cast<uint64_t>(value) * (to - from);
@@ -1097,7 +1109,8 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
         if (i >= width) break;
         const uint8_t v = valueOf(covered);
         if (v == 0) continue;
-        row[grid.mirrorX ? width - 1 - i : i] = v;
+        const uint32_t at = grid.mirrorX ? width - 1 - i : i;
+        row[at] = lightRow ? lightValue(v, lightRow[at]) : v;
         lo = std::min(lo, i);
         hi = i + 1;
         sum += v;
@@ -1124,6 +1137,9 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       while (end > begin && row[end - 1] == 0) --end;
       sum = 0;
       for (uint32_t i = begin; i < end; ++i) sum += row[i];
+    } else if (lightRow) {  // dimmed to 0 at the ends; the sum stays the one before the map
+      while (begin < end && row[begin] == 0) ++begin;
+      while (end > begin && row[end - 1] == 0) --end;
     }
     if (begin < end) {
       out.litBegin[r] = begin;

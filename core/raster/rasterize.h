@@ -203,8 +203,14 @@ struct RasterScratch {
 //   the stored row index r (after mirroring) and the row's lit extent [begin, end); it may change any
 //   value in that span (a light-uniformity map scales it; values may become 0) but none outside it.
 //   The extent is then trimmed of zeros at its ends and the value sum taken from the span.
+// - lightMap: width x height relative intensities in the image's stored order (a light-uniformity map);
+//   every written value v (after the table) becomes round(v * m / 255), m the map's value at that pixel,
+//   as it is written: only lit pixels are touched. The extents are trimmed of pixels dimmed to 0 at
+//   their ends, no fills are listed, and valueSum is the sum before the map (the part's area; the map
+//   dims the light, not the part). Not together with `row`.
 struct CoverageTransfer {
   const uint8_t* table = nullptr;
+  const uint8_t* lightMap = nullptr;
   void (*row)(void* context, uint32_t r, uint32_t begin, uint32_t end, uint8_t* rowPixels) = nullptr;
   void* context = nullptr;
 };
