@@ -333,6 +333,7 @@ void buildCoverageTable(std::span<const ContourSet> sets, const PixelGrid& grid,
       e.rowLoop = inOneRow;
       // Horizontal neighbours: the u range of the horizontal edges that follow the edge's ends (they
       // join the edge to the loop's next non-horizontal edge across that range; see coverRowByClusters).
+      if (next >= 0 && previous >= 0) continue;
       std::array<double, 2>& reach = scratch.flatReach[static_cast<std::size_t>(ids[i])];
       const auto flat = [&](std::size_t k) {
         const Point2d a = gridPoint(loop[k], grid.transposed),
@@ -598,6 +599,7 @@ void mergeClusters(RowCluster& a, const RowCluster& b) {
   if (a.winding != b.winding) a.winding = 0;
   a.continued = a.continued && b.continued;
   a.loop = a.loop || b.loop;
+  a.net += b.net;
 }
 
 void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32_t width,
@@ -648,6 +650,7 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
                     e.winding,
                     vb == y1 || e.above >= 0};
     part.loop = e.rowLoop;
+    part.net = va == y0 ? e.winding : 0;
     if ((va > y0 && e.atBottom < 0) || (vb < y1 && e.atTop < 0)) {
       // A horizontal neighbour inside the row joins this part to another across its u range: both go
       // into one cluster, which coverRow covers.
@@ -702,13 +705,10 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
   allClustered = true;
   for (RowCluster& c : clusters) {
     c.left = winding;
-    int32_t net = 0;  // the count's change across the cluster, along the row's bottom line
-    for (uint32_t a = c.begin; a < c.end; ++a)
-      if (pieces[a].va == y0) net += edgeAt(pieces[a].edge).winding;
     c.accepted = !c.loop && (c.chain() ? winding == (c.winding > 0 ? 0 : 1) : acceptedExtremes(c));
     allClustered = allClustered && c.accepted;
     extremes = extremes || (c.accepted && !c.chain());
-    winding += net;
+    winding += c.net;
   }
   if (extremes) ++scratch.extremeRows;
 

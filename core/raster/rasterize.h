@@ -130,6 +130,7 @@ struct RowCluster {
   bool continued;
   bool loop = false;      // holds a part of a loop that lies inside the row
   int32_t left = 0;       // the count left of the cluster
+  int32_t net = 0;        // the count's change across it (its parts' windings along the row's bottom)
   bool accepted = false;  // the count provably stays in {0, 1}: accumulated without bands
   bool chain() const { return winding != 0 && continued && bottoms == 1 && tops == 1 && inside == 0; }
 };
