@@ -462,13 +462,16 @@ class RawOffset {
     const double s = (qx * ex + qy * ey) / len, h = sign * (qx * nv.x + qy * nv.y);
     if (s < -1 || h < -1 || h > d + 1) return false;
     if (s <= len) return true;
-    if (kinds_[w] != kMitre && kinds_[w] != kStraight) return false;
+    if (!sweepsItsKite(w)) return false;
     const double fx = static_cast<double>(src[x].X - src[w].X), fy = static_cast<double>(src[x].Y - src[w].Y);
     const double flen = std::sqrt(fx * fx + fy * fy);
     if (!(flen > 0)) return false;
     const double rx = static_cast<double>(q.X - src[w].X), ry = static_cast<double>(q.Y - src[w].Y);
     return sign * (rx * nx.x + ry * nx.y) <= d + 1 && (rx * fx + ry * fy) / flen <= flen;
   }
+
+  // Whether vertex k's join sweeps the kite between its two moved edges: a mitre, or nearly straight.
+  bool sweepsItsKite(std::size_t k) const { return kinds_[k] == kMitre || kinds_[k] == kStraight; }
 
   bool inBands(const IntPoint& q, std::span<const IntPoint> src, std::size_t j) const {
     return inBand(q, src, j, true) && inBand(q, src, j, false);
@@ -499,8 +502,7 @@ class RawOffset {
     const std::size_t m = dest_.size(), n = src.size();
     const std::size_t next = j + 1 == n ? 0 : j + 1, prev = j == 0 ? n - 1 : j - 1;
     IntPoint loop[5];
-    if (c.u >= 1 && c.s > 0 && c.s < 1 && i >= 1 && i + 4 < m &&
-        (kinds_[next] == kMitre || kinds_[next] == kStraight)) {
+    if (c.u >= 1 && c.s > 0 && c.s < 1 && i >= 1 && i + 4 < m && sweepsItsKite(next)) {
       const IntPoint &A = dest_[i - 1], &B = dest_[i + 3], &C = dest_[i + 4];
       const Crossing e = crossing(A, dest_[i], B, C);
       if (!(e.valid && e.s > 0 && e.s < 1 && e.u > 0 && e.u < 1)) return false;
@@ -511,8 +513,7 @@ class RawOffset {
       corner.segOut = length(B, C);
       corner.out = e.u * corner.segOut;
       loop[1] = dest_[i], loop[2] = dest_[i + 1], loop[3] = dest_[i + 2], loop[4] = B;
-    } else if (c.s <= 0 && c.u > 0 && c.u < 1 && i >= 2 && i + 3 < m &&
-               (kinds_[prev] == kMitre || kinds_[prev] == kStraight)) {
+    } else if (c.s <= 0 && c.u > 0 && c.u < 1 && i >= 2 && i + 3 < m && sweepsItsKite(prev)) {
       const IntPoint &Z = dest_[i - 2], &A = dest_[i - 1], &a = dest_[i + 2], &B = dest_[i + 3];
       const Crossing e = crossing(Z, A, a, B);
       if (!(e.valid && e.s > 0 && e.s < 1 && e.u > 0 && e.u < 1)) return false;

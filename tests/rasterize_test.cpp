@@ -1022,9 +1022,9 @@ TEST(RasterCoverage, TransferTableAndRowHook) {
   EXPECT_EQ(sum, expectedSum);
 }
 
-// A light map applied as the values are written equals the map applied to the finished image
-// (applyLightMap), with a gamma table, mirrored or not, on a reused image: the same pixels, tight extents
-// (pixels dimmed to 0 at a row's ends leave it), and the value sum taken before the map.
+// A light map applied as the values are written equals the map applied to every pixel of the finished
+// image, round(v * m / 255), with a gamma table, mirrored or not, on a reused image: the same pixels, tight
+// extents (pixels dimmed to 0 at a row's ends leave it), and the value sum taken before the map.
 TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
   const LayerContours layer =
       makeLayer({circle(3.2, 2.9, 2.1, 300), reversed(circle(3.0, 3.0, 1.0, 200)), rect(4.6, 0.3, 6.6, 5.5)});
@@ -1048,7 +1048,8 @@ TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
     rasterizeCoverage(sets, grid, m, scratch, &before, &transfer);
     const MaskImage unlit = m;
     MaskImage expected = m;
-    applyLightMap(expected, map);
+    for (std::size_t p = 0; p < expected.pixels.size(); ++p)
+      expected.pixels[p] = static_cast<uint8_t>(std::lround(expected.pixels[p] * map.pixels[p] / 255.0));
     transfer.lightMap = map.pixels.data();
     rasterizeCoverage(sets, grid, m, scratch, &after, &transfer);
     ASSERT_EQ(m.pixels, expected.pixels) << "mirror " << mirror;

@@ -318,9 +318,8 @@ SoupMeasures measureSoup(std::span<const Point3f> corners) {
 double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
                           RasterScratch& scratch, const MaskTransfer* transfer) {
   if (job.antiAliased) {
-    // Gamma is applied as the values are written (no second pass); the area is taken after gamma and
-    // before the light map, which dims the light, not the part.
-    // The light map dims each value as it is written (only lit pixels are touched).
+    // Gamma and the light map are applied as the values are written (no second pass, only lit pixels);
+    // the area is taken after gamma and before the light map, which dims the light, not the part.
     uint64_t valueSum = 0;  // maskArea without a pass over the image
     const bool gamma = transfer != nullptr && transfer->gamma;
     const bool light = transfer != nullptr && !transfer->lightMap.pixels.empty();

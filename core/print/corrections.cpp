@@ -39,13 +39,4 @@ void applyTable(MaskImage& mask, const std::array<uint8_t, 256>& table) {
   mask.forgetLayout();
 }
 
-void applyLightMap(MaskImage& mask, const MaskImage& map) {
-  assert(map.pixels.size() == mask.pixels.size());
-  for (std::size_t i = 0; i < mask.pixels.size(); ++i) {
-    const unsigned v = mask.pixels[i];
-    if (v != 0) mask.pixels[i] = static_cast<uint8_t>((v * map.pixels[i] + 127u) / 255u);
-  }
-  mask.forgetLayout();
-}
-
 }  // namespace toposlice

@@ -35,8 +35,4 @@ std::array<uint8_t, 256> gammaTable(double gamma);
 // Every pixel through `table`. Clears the mask's lit-row extents (a value may become 0).
 void applyTable(MaskImage& mask, const std::array<uint8_t, 256>& table);
 
-// Light-uniformity compensation: every pixel multiplied by the map's relative intensity,
-// v' = round(v * m / 255). `map` has the mask's size (checked by the caller). Clears the extents.
-void applyLightMap(MaskImage& mask, const MaskImage& map);
-
 }  // namespace toposlice

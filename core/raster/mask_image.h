@@ -12,6 +12,11 @@
 
 namespace toposlice {
 
+// A mask value dimmed by a light-uniformity map's relative intensity m: round(v * m / 255).
+inline uint8_t lightValue(uint8_t v, uint8_t m) {
+  return static_cast<uint8_t>((unsigned{v} * m + 127u) / 255u);
+}
+
 struct PixelGrid {
   double x0 = 0, y0 = 0;  // lower-left corner of pixel (0, 0), mm
   double pixel = 0.05;    // pixel edge length, mm

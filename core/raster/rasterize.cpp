@@ -266,11 +266,6 @@ bool usableGrid(const PixelGrid& grid) {
 
 // ---- Exact coverage ----
 
-// A coverage value dimmed by a light map's relative intensity m: round(v * m / 255).
-uint8_t lightValue(uint8_t v, uint8_t m) {
-  return static_cast<uint8_t>((unsigned{v} * m + 127u) / 255u);
-}
-
 // u of edge e at height v, exact at its ends (so consecutive edges of a loop meet exactly) and kept
 // within its u range elsewhere.
 double edgeU(const CoverageEdge& e, double v) {
@@ -625,10 +620,10 @@ void coverRow(std::span<const CoverageEdge> active, double y0, double y1, uint32
 // cluster in the active list's order. Any other cluster (overlapping or crossing loops, a loop inside the
 // row, a count left of it outside {0, 1}, a part next to a horizontal edge inside the row, whose u range
 // then joins the cluster) goes to coverRow with its own edges alone, starting from the count left of it:
-// its pixels do not depend on what else lies in the row (another part of a plate). `allClustered`: no
-// cluster went to coverRow. Returns false (nothing accumulated) for a row without parts.
+// its pixels do not depend on what else lies in the row (another part of a plate). Returns whether every
+// cluster was accepted (none went to coverRow).
 bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> active, double y0, double y1,
-                        uint32_t width, RasterScratch& scratch, bool& allClustered) {
+                        uint32_t width, RasterScratch& scratch) {
   const auto edgeAt = [edges, active](uint32_t k) -> const CoverageEdge& { return edges[active[k].index]; };
   std::vector<CoverageRowPiece>& pieces = scratch.rowPieces;
   std::vector<RowCluster>& clusters = scratch.clusters;
@@ -673,7 +668,6 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
     scratch.pieceOfEdge[e.id] = index;
     pieces.push_back({ua, ub, va, vb, -1, k, false});
   }
-  if (pieces.empty()) return false;
 
   int32_t winding = 0;  // left of the cluster
   std::vector<LineCrossing>& line = scratch.lineCrossings;
@@ -701,8 +695,7 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
         line.push_back({pieces[a].ub, -edgeAt(pieces[a].edge).slope, edgeAt(pieces[a].edge).winding});
     return lineWindings(line, top) && top == bottom;
   };
-  bool extremes = false;
-  allClustered = true;
+  bool extremes = false, allClustered = true;
   for (RowCluster& c : clusters) {
     c.left = winding;
     c.accepted = !c.loop && (c.chain() ? winding == (c.winding > 0 ? 0 : 1) : acceptedExtremes(c));
@@ -751,7 +744,7 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
              width, scratch, c.left);
     ++r;
   }
-  return true;
+  return false;
 }
 
 // One pixel row [y0, y1] (see rasterize.h): the active edges' parts in the row are linked, vertex to
@@ -1058,9 +1051,9 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
 
     spans.clear();
     const double y0 = j, y1 = j + 1.0;
-    bool allClustered = false;
-    if (!scratch.alwaysBanded && coverRowByClusters(edges, active, y0, y1, width, scratch, allClustered)) {
-      ++(allClustered ? scratch.clusteredRows : scratch.bandedRows);
+    if (!scratch.alwaysBanded) {
+      ++(coverRowByClusters(edges, active, y0, y1, width, scratch) ? scratch.clusteredRows
+                                                                   : scratch.bandedRows);
     } else {
       ++scratch.bandedRows;
       std::vector<CoverageEdge>& rowEdges = scratch.coverageActive;
@@ -1131,15 +1124,15 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     }
     if (lo >= hi) continue;
     uint32_t begin = grid.mirrorX ? width - hi : lo, end = grid.mirrorX ? width - lo : hi;
-    if (transfer && transfer->row) {
-      transfer->row(transfer->context, r, begin, end, row);
+    const bool hook = transfer && transfer->row;
+    if (hook) transfer->row(transfer->context, r, begin, end, row);
+    if (hook || lightRow) {  // values may have become 0 at the ends
       while (begin < end && row[begin] == 0) ++begin;
       while (end > begin && row[end - 1] == 0) --end;
+    }
+    if (hook) {  // the light map keeps the sum before it (the part's area)
       sum = 0;
       for (uint32_t i = begin; i < end; ++i) sum += row[i];
-    } else if (lightRow) {  // dimmed to 0 at the ends; the sum stays the one before the map
-      while (begin < end && row[begin] == 0) ++begin;
-      while (end > begin && row[end - 1] == 0) --end;
     }
     if (begin < end) {
       out.litBegin[r] = begin;
