@@ -1022,9 +1022,30 @@ TEST(RasterCoverage, TransferTableAndRowHook) {
   EXPECT_EQ(sum, expectedSum);
 }
 
+// Every fill of m (MaskImage::fills) is a stretch of its row holding its value, in increasing x, none
+// overlapping.
+void expectFillsDescribePixels(const MaskImage& m) {
+  ASSERT_TRUE(m.hasFills());
+  for (uint32_t r = 0; r < m.height; ++r) {
+    const uint32_t first = m.rowFills[2 * r], count = m.rowFills[2 * r + 1];
+    const uint8_t* row = m.pixels.data() + std::size_t{r} * m.width;
+    for (uint32_t k = first; k < first + count; ++k) {
+      const uint32_t a = m.fills[3 * k], b = m.fills[3 * k + 1], value = m.fills[3 * k + 2];
+      ASSERT_LT(a, b) << "row " << r;
+      ASSERT_LE(b, m.width) << "row " << r;
+      if (k > first) {
+        ASSERT_GE(a, m.fills[3 * k - 2]) << "row " << r << ": fills overlap or are out of order";
+      }
+      for (uint32_t i = a; i < b; ++i) ASSERT_EQ(row[i], value) << "row " << r << " pixel " << i;
+    }
+  }
+}
+
 // A light map applied as the values are written equals the map applied to every pixel of the finished
 // image, round(v * m / 255), with a gamma table, mirrored or not, on a reused image: the same pixels, tight
-// extents (pixels dimmed to 0 at a row's ends leave it), and the value sum taken before the map.
+// extents (pixels dimmed to 0 at a row's ends leave it), the value sum taken before the map, and the
+// stretches of one value (the map's, within the runs between edge pixels) listed as fills. Maps: one
+// that changes at every pixel, and one of stretches (some dark) as a display's smooth map has.
 TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
   const LayerContours layer =
       makeLayer({circle(3.2, 2.9, 2.1, 300), reversed(circle(3.0, 3.0, 1.0, 200)), rect(4.6, 0.3, 6.6, 5.5)});
@@ -1032,16 +1053,21 @@ TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
   const std::array<uint8_t, 256> gamma = gammaTable(0.8);
   RasterScratch scratch;
   MaskImage m;
-  for (int mirror = 0; mirror < 2; ++mirror) {
+  for (int variant = 0; variant < 4; ++variant) {
+    const bool mirror = variant % 2 == 1, stretches = variant >= 2;
     PixelGrid grid = makeGrid(0, 0, 0.1, 70, 60);
-    grid.mirrorX = mirror == 1;
-    grid.mirrorY = mirror == 1;
-    MaskImage map;
-    map.width = grid.width;
-    map.height = grid.height;
-    map.pixels.resize(std::size_t{grid.width} * grid.height);
-    for (std::size_t p = 0; p < map.pixels.size(); ++p)
-      map.pixels[p] = static_cast<uint8_t>(p % 7 == 0 ? 0 : 90 + (p * 37) % 166);  // some pixels dark
+    grid.mirrorX = mirror;
+    grid.mirrorY = mirror;
+    MaskImage image;
+    image.width = grid.width;
+    image.height = grid.height;
+    image.pixels.resize(std::size_t{grid.width} * grid.height);
+    for (std::size_t p = 0; p < image.pixels.size(); ++p) {
+      const std::size_t x = p % grid.width, y = p / grid.width;
+      image.pixels[p] = static_cast<uint8_t>(stretches ? ((x / 11 + y) % 5 == 0 ? 0 : 120 + 9 * (x / 11) + y)
+                                                       : (p % 7 == 0 ? 0 : 90 + (p * 37) % 166));
+    }
+    const LightMap map = lightMapOf(image);
     CoverageTransfer transfer;
     transfer.table = gamma.data();
     uint64_t before = 0, after = 0;
@@ -1049,12 +1075,19 @@ TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
     const MaskImage unlit = m;
     MaskImage expected = m;
     for (std::size_t p = 0; p < expected.pixels.size(); ++p)
-      expected.pixels[p] = static_cast<uint8_t>(std::lround(expected.pixels[p] * map.pixels[p] / 255.0));
-    transfer.lightMap = map.pixels.data();
+      expected.pixels[p] = static_cast<uint8_t>(std::lround(expected.pixels[p] * image.pixels[p] / 255.0));
+    transfer.lightMap = &map;
     rasterizeCoverage(sets, grid, m, scratch, &after, &transfer);
-    ASSERT_EQ(m.pixels, expected.pixels) << "mirror " << mirror;
+    ASSERT_EQ(m.pixels, expected.pixels) << "variant " << variant;
     EXPECT_EQ(after, before);
-    EXPECT_TRUE(m.fills.empty());
+    expectFillsDescribePixels(m);
+    std::size_t litFills = 0;
+    for (std::size_t f = 0; f < m.fills.size(); f += 3) litFills += m.fills[f + 2] != 0 ? 1 : 0;
+    if (stretches) {
+      EXPECT_GT(litFills, 30u);
+    } else {
+      EXPECT_EQ(litFills, 0u);
+    }
     std::size_t dimmedEnds = 0;
     for (uint32_t r = 0; r < grid.height; ++r) {
       const uint8_t* row = m.pixels.data() + std::size_t{r} * grid.width;
@@ -1120,30 +1153,11 @@ std::vector<uint8_t> pngOf(const MaskImage& m) {
   return png;
 }
 
-// Every fill of m (MaskImage::fills) is a stretch of its row holding its value, in increasing x, none
-// overlapping.
-void expectFillsDescribePixels(const MaskImage& m) {
-  ASSERT_TRUE(m.hasFills());
-  for (uint32_t r = 0; r < m.height; ++r) {
-    const uint32_t first = m.rowFills[2 * r], count = m.rowFills[2 * r + 1];
-    const uint8_t* row = m.pixels.data() + std::size_t{r} * m.width;
-    for (uint32_t k = first; k < first + count; ++k) {
-      const uint32_t a = m.fills[3 * k], b = m.fills[3 * k + 1], value = m.fills[3 * k + 2];
-      ASSERT_LT(a, b) << "row " << r;
-      ASSERT_LE(b, m.width) << "row " << r;
-      if (k > first) {
-        ASSERT_GE(a, m.fills[3 * k - 2]) << "row " << r << ": fills overlap or are out of order";
-      }
-      for (uint32_t i = a; i < b; ++i) ASSERT_EQ(row[i], value) << "row " << r << " pixel " << i;
-    }
-  }
-}
-
 TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {
   // Anti-aliased images of wiggly outlines and random loops, mirrored or not, reused from layer to
-  // layer, with a gamma table: their fills hold what the pixels hold, and the PNG and EXR coders, which
-  // jump over them, write the bytes they write without them. A row hook may change values, so it leaves no
-  // fills.
+  // layer, with a gamma table or a light map: their fills hold what the pixels hold, and the PNG and EXR
+  // coders, which jump over them, write the bytes they write without them. A row hook may change values, so
+  // it leaves no fills.
   std::mt19937 rng(4711);
   RasterScratch scratch;
   MaskImage m;
@@ -1160,9 +1174,18 @@ TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {
         makeLayer({wigglyLoop(rng, 10, 9.5, 8, 0.1, 300), reversed(wigglyLoop(rng, 10, 9.5, 4, 0.1, 200))});
     std::vector<ContourSet> sets = {{&wiggly, 1}};
     if (trial % 4 == 3) sets = {{&random[0], 1}, {&random[1], 1}, {&random[2], -1}};
+    MaskImage image;  // a light map of stretches
+    image.width = grid.width;
+    image.height = grid.height;
+    image.pixels.resize(std::size_t{grid.width} * grid.height);
+    for (std::size_t p = 0; p < image.pixels.size(); ++p)
+      image.pixels[p] = static_cast<uint8_t>(150 + (p % grid.width) / 13 + (p / grid.width) % 3);
+    const LightMap map = lightMapOf(image);
     CoverageTransfer transfer;
     transfer.table = gamma;
-    rasterizeCoverage(sets, grid, m, scratch, nullptr, trial % 5 == 2 ? &transfer : nullptr);
+    transfer.lightMap = trial % 5 == 4 ? &map : nullptr;
+    rasterizeCoverage(sets, grid, m, scratch, nullptr,
+                      trial % 5 == 2 || trial % 5 == 4 ? &transfer : nullptr);
     expectFillsDescribePixels(m);
     for (uint32_t r = 0; r < m.height; ++r) fills += m.rowFills[2 * r + 1];
     MaskImage plain = m;

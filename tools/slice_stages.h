@@ -66,7 +66,7 @@ nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char*
 struct MaskTransfer {
   std::array<uint8_t, 256> gammaTable{};
   bool gamma = false;
-  MaskImage lightMap;  // empty: none
+  LightMap lightMap;  // empty: none
 };
 MaskTransfer maskTransfer(const PrintSettings& print, const MaskJob& job);
 

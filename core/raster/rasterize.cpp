@@ -1031,8 +1031,8 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   active.clear();
   // The constant stretches between edge pixels, for the coders (MaskImage::fills), unless a row hook
   // may change the values after they are written.
-  const uint8_t* light = transfer ? transfer->lightMap : nullptr;
-  const bool keepFills = !(transfer && (transfer->row || light));
+  const LightMap* light = transfer ? transfer->lightMap : nullptr;
+  const bool keepFills = !(transfer && transfer->row);
   if (keepFills) out.rowFills.assign(std::size_t{2} * height, 0);
   for (uint32_t j = 0; j < height; ++j) {
     std::size_t kept = 0;
@@ -1066,23 +1066,47 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     // The row: prefix sums over the touched cells, constant runs between them.
     const uint32_t r = grid.mirrorY ? height - 1 - j : j;
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
-    const uint8_t* lightRow = light ? light + static_cast<std::size_t>(r) * width : nullptr;
+    const uint8_t* lightRow = light ? light->pixels.data() + static_cast<std::size_t>(r) * width : nullptr;
     uint32_t lo = width, hi = 0;  // lit extent, unmirrored
     uint64_t sum = 0;
     const std::size_t firstFill = out.fills.size();
-    const auto fill = [&](uint32_t from, uint32_t to, uint8_t value) {
-      if (from >= to) return;
-      if (keepFills && to - from >= kMinFill) {  // in stored order; reversed below when mirrored
-        out.fills.push_back(grid.mirrorX ? width - to : from);
-        out.fills.push_back(grid.mirrorX ? width - from : to);
+    // Stored pixels [a, b) set to `value`, listed as a fill (in the order of the pass over the row, so
+    // reversed below when mirrored).
+    const auto put = [&](uint32_t a, uint32_t b, uint8_t value) {
+      if (keepFills && b - a >= kMinFill) {
+        out.fills.push_back(a);
+        out.fills.push_back(b);
         out.fills.push_back(value);
       }
-      if (value == 0) return;
-      const uint32_t at = grid.mirrorX ? width - to : from;
-      if (lightRow) {
-        for (uint32_t p = at; p < at + (to - from); ++p) row[p] = lightValue(value, lightRow[p]);
-      } else {
-        std::memset(row + at, value, to - from);
+      if (value != 0) std::memset(row + a, value, b - a);
+    };
+    // The unmirrored pixels [from, to) at one value before the light map.
+    const auto fill = [&](uint32_t from, uint32_t to, uint8_t value) {
+      if (from >= to) return;
+      const uint32_t at = grid.mirrorX ? width - to : from, end = at + (to - from);
+      if (value == 0 || !lightRow) {
+        put(at, end, value);
+        if (value == 0) return;
+      } else {  // one value per stretch of the map, in the pass's order
+        const uint32_t* first = light->starts.data() + light->rowFirst[r];
+        const uint32_t* last = light->starts.data() + light->rowFirst[r + 1];
+        const auto dim = [&](uint32_t a, uint32_t b) { put(a, b, lightValue(value, lightRow[a])); };
+        if (!grid.mirrorX) {
+          const uint32_t* next = std::upper_bound(first + 1, last, at);  // the stretch after at's
+          for (uint32_t a = at; a < end; ++next) {
+            const uint32_t b = next < last ? std::min(*next, end) : end;
+            dim(a, b);
+            a = b;
+          }
+        } else {
+          const uint32_t* start = std::upper_bound(first + 1, last, end - 1) - 1;  // end - 1's stretch
+          for (uint32_t b = end;; --start) {
+            const uint32_t a = std::max(*start, at);
+            dim(a, b);
+            if (a == at) break;
+            b = a;
+          }
+        }
       }
       lo = std::min(lo, from);
       hi = to;
@@ -1140,6 +1164,22 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     }
     if (valueSum) *valueSum += sum;
   }
+}
+
+LightMap lightMapOf(const MaskImage& map) {
+  LightMap light;
+  light.width = map.width;
+  light.height = map.height;
+  light.pixels = map.pixels;
+  light.rowFirst.reserve(std::size_t{map.height} + 1);
+  for (uint32_t r = 0; r < map.height; ++r) {
+    light.rowFirst.push_back(static_cast<uint32_t>(light.starts.size()));
+    const uint8_t* row = map.pixels.data() + std::size_t{r} * map.width;
+    for (uint32_t i = 0; i < map.width; ++i)
+      if (i == 0 || row[i] != row[i - 1]) light.starts.push_back(i);
+  }
+  light.rowFirst.push_back(static_cast<uint32_t>(light.starts.size()));
+  return light;
 }
 
 std::size_t countSkippedLoops(std::span<const ContourSet> sets) {

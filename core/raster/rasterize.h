@@ -196,6 +196,18 @@ struct RasterScratch {
   std::size_t clusteredRows = 0, extremeRows = 0, bandedRows = 0;
 };
 
+// A light-uniformity map: relative intensities (0-255) in a mask's stored order, with the stretches of
+// one value in each row, so that a lit run is dimmed one stretch at a time: row r's stretches start at
+// starts[rowFirst[r]], ..., starts[rowFirst[r + 1] - 1] (the first at 0), each ending where the next
+// starts or at the row's end.
+struct LightMap {
+  uint32_t width = 0, height = 0;
+  std::vector<uint8_t> pixels;
+  std::vector<uint32_t> starts, rowFirst;
+  bool empty() const { return pixels.empty(); }
+};
+LightMap lightMapOf(const MaskImage& map);
+
 // Optional transfer applied as the coverage values are written (gamma, threshold, light map), so that
 // it costs no second pass over the image:
 // - table: 256 entries; the written value is table[round(255 * a)]. table[0] must be 0 (dark pixels are
@@ -204,14 +216,16 @@ struct RasterScratch {
 //   the stored row index r (after mirroring) and the row's lit extent [begin, end); it may change any
 //   value in that span (a light-uniformity map scales it; values may become 0) but none outside it.
 //   The extent is then trimmed of zeros at its ends and the value sum taken from the span.
-// - lightMap: width x height relative intensities in the image's stored order (a light-uniformity map);
-//   every written value v (after the table) becomes round(v * m / 255), m the map's value at that pixel,
-//   as it is written: only lit pixels are touched. The extents are trimmed of pixels dimmed to 0 at
-//   their ends, no fills are listed, and valueSum is the sum before the map (the part's area; the map
-//   dims the light, not the part). Not together with `row`.
+// - lightMap: a light-uniformity map of the grid's size (lightMapOf); every written value v (after the
+//   table) becomes round(v * m / 255), m the map's value at that pixel, as it is written: only lit
+//   pixels are touched, a run between edge pixels with one value per stretch of the map, and those
+//   stretches are listed as fills. The extents are trimmed of pixels dimmed to 0 at their ends (and the
+//   fills to the extents), and valueSum is the sum before the map (the part's area; the map dims the
+//   light, not the part). Not together with `row`.
+struct LightMap;
 struct CoverageTransfer {
   const uint8_t* table = nullptr;
-  const uint8_t* lightMap = nullptr;
+  const LightMap* lightMap = nullptr;
   void (*row)(void* context, uint32_t r, uint32_t begin, uint32_t end, uint8_t* rowPixels) = nullptr;
   void* context = nullptr;
 };
