@@ -244,6 +244,9 @@ class RawOffset {
     double segOut = 0;       // the moved segment the trim ends on (its "out" is measured along it)
     bool ok = false;
     uint8_t before = 0, after = 0;  // 1: the point before (after) the detour goes too (a swallowed edge)
+    // Detours it replaces: 1, or k for a run's envelope (runTrim; 0 for the other detours of the run),
+    // whose points are envelope_[first, first + count) instead of (x, y).
+    uint32_t span = 1, first = 0, count = 0;
   };
 
   // Where the lines A -> b and a -> B cross: A + s (b - A) = a + u (B - a).
@@ -403,12 +406,29 @@ class RawOffset {
       corner.ok = reach <= edgeIn && reach <= corner.edgeOut;
       if (!corner.ok && n >= 6) corner.ok = inBand(b, src, j, true) && inBand(a, src, j, false);
     }
-    // Pass 2: two trimmed corners at the ends of one edge share it; a trim that also removes the point
+    // Pass 2: runs of concave corners in a row (detours 3 points apart) where pass 1 left a detour, or
+    // where two trims overlap on the edge between them, go by their envelope where it is sound (runTrim).
+    envelope_.clear();
+    const std::size_t count = detours_.size();
+    const bool wraps = (detours_.back() + 3) % m == detours_[0];
+    for (std::size_t t = 0; t < count;) {
+      std::size_t e = t;
+      bool open = !trims_[t].ok;
+      while (e + 1 < count && detours_[e + 1] == detours_[e] + 3) {
+        open = open || !trims_[e + 1].ok || trims_[e].out + trims_[e + 1].in + 2 > trims_[e].edgeOut;
+        ++e;
+      }
+      if (open && e > t && !(wraps && (t == 0 || e + 1 == count))) runTrim(src, t, e);
+      t = e + 1;
+    }
+    // Pass 3: two trimmed corners at the ends of one edge share it; a trim that also removes the point
     // before or after its detour keeps clear of the detours next to it.
     for (std::size_t t = 0; t < detours_.size(); ++t) {
-      const std::size_t next = t + 1 == detours_.size() ? 0 : t + 1;
+      if (trims_[t].span == 0) continue;
+      const std::size_t last = t + trims_[t].span - 1;  // a run's last detour
+      const std::size_t next = last + 1 == detours_.size() ? 0 : last + 1;
       if (next == t) continue;
-      const std::size_t gap = (detours_[next] + m - detours_[t]) % m;
+      const std::size_t gap = (detours_[next] + m - detours_[last]) % m;
       Trim& here = trims_[t];
       Trim& there = trims_[next];
       if (!here.ok || !there.ok) continue;
@@ -420,7 +440,7 @@ class RawOffset {
         if (here.out + there.in + 2 > here.segOut) here.ok = there.ok = false;  // one segment, in order
       }
     }
-    // Pass 3: the loop, each trimmed detour replaced by its crossing.
+    // Pass 4: the loop, each trimmed detour (or run) replaced by its crossing (or envelope).
     trimmed_.resize(m);
     IntPoint* out = trimmed_.data();
     std::size_t from = 0;
@@ -430,8 +450,13 @@ class RawOffset {
       const std::size_t i = detours_[t];
       out = std::copy(dest_.begin() + static_cast<std::ptrdiff_t>(from),
                       dest_.begin() + static_cast<std::ptrdiff_t>(i - corner.before), out);
-      *out++ = IntPoint(round(corner.x), round(corner.y));
-      from = i + 3 + corner.after;
+      if (corner.span == 1) {
+        *out++ = IntPoint(round(corner.x), round(corner.y));
+      } else {
+        out =
+            std::copy(envelope_.begin() + corner.first, envelope_.begin() + corner.first + corner.count, out);
+      }
+      from = i + 3 * corner.span + corner.after;
     }
     out = std::copy(dest_.begin() + static_cast<std::ptrdiff_t>(from), dest_.end(), out);
     trimmed_.resize(static_cast<std::size_t>(out - trimmed_.data()));
@@ -536,6 +561,135 @@ class RawOffset {
     return true;
   }
 
+  // A run of k concave corners in a row, v_1 = src[corners_[t]], ..., v_k = src[corners_[e]] (their
+  // detours 3 points apart in dest_), between v_0 and v_{k+1}: its k + 1 moved edges (the first from
+  // the point before the first detour, the last to the point after the last one) are replaced by their
+  // envelope, the boundary of the region beyond all their lines, where that is sound (docs/DESIGN.md,
+  // "Runs of concave corners"): the edges turn by less than a half turn in all and every edge's band
+  // lies beyond every line; the envelope's first vertex stays on the first edge and its last on the
+  // last edge while the distance grows (v_0 beyond every line by d (1 - n_0 . n_j), v_{k+1} likewise);
+  // and the bands lie after v_0 along the first edge and before v_{k+1} along the last. One unit of
+  // slack on each side, as for the reach. For one corner these are the reach rule of pass 1. Sets
+  // trims_[t] to the run's trim.
+  void runTrim(std::span<const IntPoint> src, std::size_t t, std::size_t e) {
+    const std::size_t m = dest_.size(), n = src.size();
+    const std::size_t k = e - t + 1, i0 = detours_[t];
+    if (n < k + 4 || i0 < 1 || i0 + 3 * k >= m) return;
+    const std::size_t j0 = corners_[t] + n - 1;  // v_i = src[(j0 + i) % n]; edge i runs from v_i
+    const auto vertex = [&](std::size_t i) -> const IntPoint& { return src[(j0 + i) % n]; };
+    const auto normal = [&](std::size_t i) { return normals_[(j0 + i) % n]; };
+    // Moved edge i: from the point before the first detour (i = 0) or a_i, to b_{i+1} or the point after.
+    const auto from = [&](std::size_t i) -> const IntPoint& {
+      return dest_[i == 0 ? i0 - 1 : i0 + 3 * i - 1];
+    };
+    const auto to = [&](std::size_t i) -> const IntPoint& { return dest_[i0 + 3 * i]; };
+    const double d = std::fabs(delta_), sign = delta_ < 0 ? -1.0 : 1.0;
+    const Normal n0 = normal(0), nk = normal(k);
+    const auto dot = [](const Normal& a, const Normal& b) { return a.x * b.x + a.y * b.y; };
+    // Less than a half turn in all: every corner turns one way by less than a half turn, so the normals
+    // stay on one side of n_0 until the turn reaches a half.
+    const auto cross = [](const Normal& a, const Normal& b) { return a.x * b.y - a.y * b.x; };
+    const double way = cross(n0, normal(1)) > 0 ? 1.0 : -1.0;
+    for (std::size_t i = 1; i <= k; ++i)
+      if (!(way * cross(n0, normal(i)) > 0)) return;
+    const auto over = [&](std::size_t j, double x, double y) {  // (x, y) over edge j's line, outwards
+      const Normal nj = normal(j);
+      return sign *
+             ((x - static_cast<double>(vertex(j).X)) * nj.x + (y - static_cast<double>(vertex(j).Y)) * nj.y);
+    };
+    const auto height = [&](std::size_t j, const IntPoint& q) {
+      return over(j, static_cast<double>(q.X), static_cast<double>(q.Y));
+    };
+    // Every band on the outer side of every line (the run is a convex arc, so this holds for edges less
+    // than a quarter turn apart): the moved ends of the others.
+    for (std::size_t i = 0; i <= k; ++i) {
+      const Normal ni = normal(i);
+      for (std::size_t j = 0; j <= k; ++j) {
+        if (j == i || dot(ni, normal(j)) >= 0) continue;
+        for (const std::size_t end : {i, i + 1}) {
+          const double x = static_cast<double>(vertex(end).X) + delta_ * ni.x;
+          const double y = static_cast<double>(vertex(end).Y) + delta_ * ni.y;
+          if (over(j, x, y) < 1) return;
+        }
+      }
+    }
+    for (std::size_t j = 0; j <= k; ++j) {
+      if (j > 0 && height(j, vertex(0)) < d * (1 - dot(n0, normal(j))) + 1) return;
+      if (j < k && height(j, vertex(k + 1)) < d * (1 - dot(nk, normal(j))) + 1) return;
+    }
+    const IntPoint &v0 = vertex(0), &vk = vertex(k);
+    const double l0 = length(v0, vertex(1)), lk = length(vk, vertex(k + 1));
+    if (!(l0 > 0 && lk > 0)) return;
+    const double u0x = static_cast<double>(vertex(1).X - v0.X) / l0,
+                 u0y = static_cast<double>(vertex(1).Y - v0.Y) / l0;
+    const double ukx = static_cast<double>(vertex(k + 1).X - vk.X) / lk,
+                 uky = static_cast<double>(vertex(k + 1).Y - vk.Y) / lk;
+    for (std::size_t i = 0; i <= k; ++i) {  // the moved ends of edge i, along the first and the last edge
+      const Normal ni = normal(i);
+      for (const std::size_t end : {i, i + 1}) {
+        const double qx = static_cast<double>(vertex(end).X) + delta_ * ni.x;
+        const double qy = static_cast<double>(vertex(end).Y) + delta_ * ni.y;
+        const double px = static_cast<double>(vertex(end).X), py = static_cast<double>(vertex(end).Y);
+        if (i > 0 &&
+            std::min((qx - static_cast<double>(v0.X)) * u0x + (qy - static_cast<double>(v0.Y)) * u0y,
+                     (px - static_cast<double>(v0.X)) * u0x + (py - static_cast<double>(v0.Y)) * u0y) < 1)
+          return;
+        if (i < k && std::max((qx - static_cast<double>(vk.X)) * ukx + (qy - static_cast<double>(vk.Y)) * uky,
+                              (px - static_cast<double>(vk.X)) * ukx +
+                                  (py - static_cast<double>(vk.Y)) * uky) > lk - 1)
+          return;
+      }
+    }
+    // The envelope: the lines in turn, each dropping those before it whose piece it empties; at[l] is
+    // where line lines[l] starts (a fraction of its moved edge), points[l - 1] that point.
+    std::vector<uint32_t>& lines = runLines_;
+    std::vector<double>& at = runAt_;
+    std::vector<Normal>& points = runPoints_;
+    lines.assign(1, 0);
+    at.assign(1, 0.0);
+    points.clear();
+    double first = 0;  // where the envelope leaves the first edge
+    for (std::size_t i = 1; i <= k; ++i) {
+      for (;;) {
+        const std::size_t top = lines.back();
+        const Crossing c = crossing(from(top), to(top), from(i), to(i));
+        if (!c.valid) return;
+        if (lines.size() > 1 && c.s <= at.back()) {
+          lines.pop_back();
+          at.pop_back();
+          points.pop_back();
+          continue;
+        }
+        if (lines.size() == 1) {
+          if (!(c.s > 0 && c.s <= 1)) return;
+          first = c.s;
+        }
+        const IntPoint& p = from(top);
+        points.push_back({static_cast<double>(p.X) + c.s * static_cast<double>(to(top).X - p.X),
+                          static_cast<double>(p.Y) + c.s * static_cast<double>(to(top).Y - p.Y)});
+        lines.push_back(static_cast<uint32_t>(i));
+        at.push_back(c.u);
+        break;
+      }
+    }
+    if (!(at.back() >= 0 && at.back() < 1)) return;
+    Trim run;
+    run.ok = true;
+    run.span = static_cast<uint32_t>(k);
+    run.first = static_cast<uint32_t>(envelope_.size());
+    run.count = static_cast<uint32_t>(points.size());
+    for (const Normal& p : points) envelope_.push_back(IntPoint(round(p.x), round(p.y)));
+    run.in = (1 - first) * length(from(0), to(0));
+    run.segOut = length(from(k), to(k));
+    run.out = at.back() * run.segOut;
+    run.edgeOut = lk;
+    for (std::size_t u = t; u <= e; ++u) {
+      trims_[u] = Trim{};
+      trims_[u].span = 0;
+    }
+    trims_[t] = run;
+  }
+
   static constexpr uint8_t kStraight = 0, kDetour = 1, kMitre = 2, kSquare = 3;
   double delta_ = 0, miterBound_ = 0.5;
   std::vector<IntPoint> points_;
@@ -546,6 +700,10 @@ class RawOffset {
   std::vector<uint32_t> detours_;  // where each concave corner's three points start in dest_
   std::vector<uint32_t> corners_;  // and the source vertex of each
   std::vector<Trim> trims_;
+  std::vector<IntPoint> envelope_;  // the runs' envelope points (runTrim)
+  std::vector<uint32_t> runLines_;
+  std::vector<double> runAt_;
+  std::vector<Normal> runPoints_;
   bool hasLowest_ = false;
   IntPoint lowestPoint_;
   std::size_t lowestPath_ = 0;

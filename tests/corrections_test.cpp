@@ -464,6 +464,56 @@ TEST(PolygonOffset, ShortEdgesAfterConcaveCornersAreTrimmedWhereTheSweptBandsHol
   }
 }
 
+// Runs of concave corners whose edges are shorter than the distance times their turn (the rounded
+// bottom of a groove narrower than the distance, cut into short edges as a dense mesh's layers have
+// it): the moved edges of the run are replaced by their envelope, and no detour is left where the run
+// turns by less than a half turn and its end edges hold the envelope's ends. Random grooves (jittered,
+// some turning more than a half turn, with short or long sides), grown and shrunk (shrinking the box
+// with the groove is growing it: its convex corners turn concave): the region is ClipperOffset's.
+TEST(PolygonOffset, RunsOfConcaveCornersGoByTheirEnvelope) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> uniform(0, 1);
+  std::size_t compared = 0, noDetour = 0;
+  for (int trial = 0; trial < 2000; ++trial) {
+    const int edges = 2 + trial % 40;
+    const double alpha = 0.15 + (trial % 9 == 0 ? 1.7 : 1.3) * uniform(rng);  // half the groove's turn
+    const double radius = 0.005 + 0.3 * uniform(rng), d = 0.01 + 0.5 * uniform(rng);
+    const double side = 0.02 + (trial % 2 ? 2.0 : 0.3) * uniform(rng);
+    const double jitter = trial % 3 == 0 ? 0.4 * radius * alpha / edges * uniform(rng) : 0;
+    // The groove's bottom: an arc about (0, c) from angle alpha to -alpha, and its sides, tangent to it,
+    // `side` long, up to y = top; the box around it.
+    const double c = 0;
+    const double top = c - radius * std::cos(alpha) + side * std::sin(alpha);
+    const double xTop = radius * std::sin(alpha) + side * std::cos(alpha);
+    const double wide = std::max(4.0, xTop + 2);
+    std::vector<Point2d> points{{-wide, top - 6}, {wide, top - 6}, {wide, top}, {xTop, top}};
+    for (int i = 0; i <= edges; ++i) {
+      const double a =
+          alpha - 2 * alpha * i / edges + (i > 0 && i < edges ? jitter * (uniform(rng) - 0.5) : 0);
+      points.push_back({radius * std::sin(a), c - radius * std::cos(a)});
+    }
+    points.push_back({-xTop, top});
+    points.push_back({-wide, top});
+    LayerContours shape;
+    addLoop(shape, points);
+    for (const double sd : {d, -d}) {
+      const ContourSet set{&shape, 1};
+      LayerContours offset, raw;
+      correctLayer({&set, 1}, {sd, 0, 0}, 0.0, offset);
+      const LayerContours reference = clipperOffset(shape, sd);
+      ASSERT_LE(differenceArea(offset, reference), 2e-6 * std::max(perimeter(reference), 1e-3))
+          << "trial " << trial << ", d " << sd;
+      ASSERT_TRUE(rawCorrectedLoops({&set, 1}, {sd, 0, 0}, 0.0, raw));
+      ASSERT_LE(differenceArea(raw, reference), 2e-6 * std::max(perimeter(reference), 1e-3))
+          << "raw, trial " << trial << ", d " << sd;
+      ++compared;
+      if (sd > 0 && raw.points.size() <= points.size()) ++noDetour;
+    }
+  }
+  EXPECT_EQ(compared, 4000u);
+  EXPECT_GT(noDetour, 300u);
+}
+
 // The masks' raw loops (built straight from the layer's points) united are correctLayer's polygons
 // (built through its Paths), point for point: masks-only and contour jobs see one region.
 TEST(PolygonOffset, RawLoopsUniteToTheCorrectedLayerPointForPoint) {
