@@ -19,6 +19,7 @@
 #include "core/slicing/slice_march.h"
 #include "io/masks/mask_png.h"
 #include "io/readers/stl_reader.h"
+#include "offset/polygon_offset.h"
 #include "parallel/parallel.h"
 #include "tests/fixtures/models.h"
 
@@ -290,6 +291,39 @@ void BM_RasterizeLayer(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(layer.points.size()));
 }
 BENCHMARK(BM_RasterizeLayer)->ArgsProduct({{25, 50, 75}, {0, 1}})->Unit(benchmark::kMicrosecond);
+
+// The absolute correction's raw loops of one layer (grown by 0.05 mm, as the corrections benchmark in
+// docs/BENCHMARKS.md): cleaning, offset and trims. Args: height (25, 50, 75 %). Items: contour points.
+void BM_GrowLayer(benchmark::State& state) {
+  const LayerContours& layer = maskFixture().layers[state.range(0) / 25 - 1];
+  const ContourSet set{&layer, 1};
+  LayerContours grown;
+  for (auto _ : state) {
+    rawCorrectedLoops({&set, 1}, {0.05, 0, 0}, 0.0, grown);
+    benchmark::DoNotOptimize(grown.points.data());
+  }
+  state.counters["points"] = static_cast<double>(grown.points.size());
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(layer.points.size()));
+}
+BENCHMARK(BM_GrowLayer)->Arg(25)->Arg(50)->Arg(75)->Unit(benchmark::kMicrosecond);
+
+// The grown layer's anti-aliased mask (the rows that the detours left in it send to the banded path).
+void BM_RasterizeGrownLayer(benchmark::State& state) {
+  const MaskFixture& f = maskFixture();
+  const ContourSet set{&f.layers[state.range(0) / 25 - 1], 1};
+  LayerContours grown;
+  rawCorrectedLoops({&set, 1}, {0.05, 0, 0}, 0.0, grown);
+  const ContourSet grownSet{&grown, 1};
+  RasterScratch raster;
+  MaskImage mask;
+  for (auto _ : state) {
+    rasterizeCoverage({&grownSet, 1}, f.grid, mask, raster);
+    benchmark::DoNotOptimize(mask.pixels.data());
+  }
+  state.counters["banded_rows"] =
+      static_cast<double>(raster.bandedRows) / static_cast<double>(state.iterations());
+}
+BENCHMARK(BM_RasterizeGrownLayer)->Arg(25)->Arg(50)->Arg(75)->Unit(benchmark::kMicrosecond);
 
 // encodeMaskPng of one layer; args: height (25, 50, 75 %), anti-aliased (0, 1), code (0 smallest: the
 // default, dynamic for these layers; 1 fixed). Counter: PNG bytes.
