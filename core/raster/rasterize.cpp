@@ -6,6 +6,8 @@
 #include <cstring>
 #include <limits>
 
+#include "core/prefetch.h"
+
 // Scanline conversion with an active edge table: edges are bucketed by the first sample line they cross
 // (count, prefix sum, fill), the active list is kept sorted by x from one sample line to the next
 // (insertion sort on nearly sorted data) and swept left to right accumulating the winding count.
@@ -1067,6 +1069,10 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     const uint32_t r = grid.mirrorY ? height - 1 - j : j;
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     const uint8_t* lightRow = light ? light->pixels.data() + static_cast<std::size_t>(r) * width : nullptr;
+    // The map's next row, fetched at this row's edge pixels while they are written: a row's edges lie
+    // near those of the row below, and the map (megabytes) is read a few bytes a row.
+    const uint8_t* nextLightRow =
+        lightRow && j + 1 < height ? (grid.mirrorY ? lightRow - width : lightRow + width) : nullptr;
     uint32_t lo = width, hi = 0;  // lit extent, unmirrored
     uint64_t sum = 0;
     const std::size_t firstFill = out.fills.size();
@@ -1127,7 +1133,12 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
         const uint8_t v = valueOf(covered);
         if (v == 0) continue;
         const uint32_t at = grid.mirrorX ? width - 1 - i : i;
-        row[at] = lightRow ? lightValue(v, lightRow[at]) : v;
+        if (lightRow) {
+          if (nextLightRow) prefetch(nextLightRow + at);
+          row[at] = lightValue(v, lightRow[at]);
+        } else {
+          row[at] = v;
+        }
         lo = std::min(lo, i);
         hi = i + 1;
         sum += v;
