@@ -809,6 +809,16 @@ bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& 
   return true;
 }
 
+std::vector<std::array<int64_t, 2>> cleanedOutline(std::span<const std::array<int64_t, 2>> loop,
+                                                   double distance) {
+  Path in, out;
+  for (const auto& p : loop) in.push_back(IntPoint(p[0], p[1]));
+  LoopCleaner().clean(in, distance, out);
+  std::vector<std::array<int64_t, 2>> kept;
+  for (const IntPoint& p : out) kept.push_back({p.X, p.Y});
+  return kept;
+}
+
 std::size_t unitePositive(const LayerContours& loops, double z, LayerContours& out) {
   Paths input;
   for (std::size_t l = 0; l < loops.loopCount(); ++l) {

@@ -35,8 +35,10 @@
 //   point lies on no single facet).
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <span>
+#include <vector>
 
 #include "core/raster/rasterize.h"
 #include "core/slicing/contours.h"
@@ -73,6 +75,12 @@ std::size_t correctLayer(std::span<const ContourSet> sets, const LayerCorrection
 // not fit), the loop crosses itself there.
 bool rawCorrectedLoops(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                        LayerContours& out);
+
+// The outline cleaning every offset starts with (ClipperLib::CleanPolygon's): the points of `loop`, in
+// offset units (kOffsetUnitsPerMm), that it keeps within `distance` units, in the order it returns
+// them; none when fewer than three are left.
+std::vector<std::array<int64_t, 2>> cleanedOutline(std::span<const std::array<int64_t, 2>> loop,
+                                                   double distance);
 
 // The positive-winding region of `loops` (all closed) as clean polygons into `out` (cleared first; out.z =
 // z): Clipper's union, as correctLayer's offset ends. Returns the number of loops written.

@@ -464,6 +464,52 @@ TEST(PolygonOffset, ShortEdgesAfterConcaveCornersAreTrimmedWhereTheSweptBandsHol
   }
 }
 
+// The outline cleaning before every offset keeps the points ClipperLib::CleanPolygon keeps, in its
+// order: random loops of 3 to 60 points with runs of points closer than the distance, points nearly on
+// the line of their neighbours, spikes and collapsing loops (where the cleaning walks back past the
+// first point), and a few long straight stretches at large coordinates.
+TEST(PolygonOffset, OutlineCleaningIsClippersCleanPolygon) {
+  std::mt19937 rng(5);
+  std::uniform_int_distribution<int> pick(0, 9);
+  std::normal_distribution<double> jitter(0, 1);
+  const double distance = 500;
+  std::size_t removed = 0, empty = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    const int n = 3 + trial % 58;
+    const double scale = trial % 10 == 0 ? 1e3 : trial % 10 == 1 ? 1e8 : 1e5;
+    std::vector<std::array<int64_t, 2>> loop;
+    ClipperLib::Path path;
+    double x = 0, y = 0;
+    for (int i = 0; i < n; ++i) {
+      const int kind = pick(rng);
+      if (kind < 3) {  // close to the point before
+        x += 300 * jitter(rng);
+        y += 300 * jitter(rng);
+      } else if (kind < 6 && i >= 2) {  // nearly on the line of the two before
+        x += (x - static_cast<double>(loop[i - 2][0])) + 200 * jitter(rng);
+        y += (y - static_cast<double>(loop[i - 2][1])) + 200 * jitter(rng);
+      } else {
+        x += scale * jitter(rng);
+        y += scale * jitter(rng);
+      }
+      loop.push_back({std::llround(x), std::llround(y)});
+      path.push_back(ClipperLib::IntPoint(loop.back()[0], loop.back()[1]));
+    }
+    ClipperLib::Path expected;
+    ClipperLib::CleanPolygon(path, expected, distance);
+    const std::vector<std::array<int64_t, 2>> kept = cleanedOutline(loop, distance);
+    ASSERT_EQ(kept.size(), expected.size()) << "trial " << trial;
+    for (std::size_t i = 0; i < kept.size(); ++i) {
+      ASSERT_EQ(kept[i][0], expected[i].X) << "trial " << trial << ", point " << i;
+      ASSERT_EQ(kept[i][1], expected[i].Y) << "trial " << trial << ", point " << i;
+    }
+    removed += loop.size() - kept.size();
+    empty += kept.empty() ? 1 : 0;
+  }
+  EXPECT_GT(removed, 50000u);
+  EXPECT_GT(empty, 100u);
+}
+
 // Runs of concave corners whose edges are shorter than the distance times their turn (the rounded
 // bottom of a groove narrower than the distance, cut into short edges as a dense mesh's layers have
 // it): the moved edges of the run are replaced by their envelope, and no detour is left where the run
