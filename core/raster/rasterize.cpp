@@ -270,7 +270,7 @@ bool usableGrid(const PixelGrid& grid) {
 
 // u of edge e at height v, exact at its ends (so consecutive edges of a loop meet exactly) and kept
 // within its u range elsewhere.
-double edgeU(const CoverageEdge& e, double v) {
+inline double edgeU(const CoverageEdge& e, double v) {
   if (v <= e.v0) return e.u0;
   if (v >= e.v1) return e.u1;
   const double u = e.u0 + (v - e.v0) * e.slope;
@@ -749,6 +749,39 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
   return false;
 }
 
+// Stored pixels [at, end) of row r at `value` dimmed by the light map, one memset per stretch of the
+// map, each stretch of kMinFill pixels or more listed in `fills` (when given) in the order of the pass
+// over the row: backwards when the row is mirrored (the row's fills are reversed after it). Kept out of
+// line: the row loop is hot and this runs only with a light map.
+[[gnu::noinline]] void dimByStretches(const LightMap& light, uint32_t r, uint32_t at, uint32_t end,
+                                      uint8_t value, bool mirrored, std::vector<uint32_t>* fills,
+                                      uint8_t* row) {
+  const uint8_t* map = light.pixels.data() + static_cast<std::size_t>(r) * light.width;
+  const uint32_t* first = light.starts.data() + light.rowFirst[r];
+  const uint32_t* last = light.starts.data() + light.rowFirst[r + 1];
+  const auto dim = [&](uint32_t a, uint32_t b) {
+    const uint8_t v = lightValue(value, map[a]);
+    if (fills && b - a >= kMinFill) fills->insert(fills->end(), {a, b, v});
+    if (v != 0) std::memset(row + a, v, b - a);
+  };
+  if (!mirrored) {
+    const uint32_t* next = std::upper_bound(first + 1, last, at);  // the stretch after at's
+    for (uint32_t a = at; a < end; ++next) {
+      const uint32_t b = next < last ? std::min(*next, end) : end;
+      dim(a, b);
+      a = b;
+    }
+  } else {
+    const uint32_t* start = std::upper_bound(first + 1, last, end - 1) - 1;  // end - 1's stretch
+    for (uint32_t b = end;; --start) {
+      const uint32_t a = std::max(*start, at);
+      dim(a, b);
+      if (a == at) break;
+      b = a;
+    }
+  }
+}
+
 // One pixel row [y0, y1] (see rasterize.h): the active edges' parts in the row are linked, vertex to
 // vertex, into chains of one winding; the row is cut where a chain starts or ends inside it (local
 // extremes, horizontal edges, touching loops). In each band the chains spanning it are ordered at its
@@ -1093,26 +1126,8 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       if (value == 0 || !lightRow) {
         put(at, end, value);
         if (value == 0) return;
-      } else {  // one value per stretch of the map, in the pass's order
-        const uint32_t* first = light->starts.data() + light->rowFirst[r];
-        const uint32_t* last = light->starts.data() + light->rowFirst[r + 1];
-        const auto dim = [&](uint32_t a, uint32_t b) { put(a, b, lightValue(value, lightRow[a])); };
-        if (!grid.mirrorX) {
-          const uint32_t* next = std::upper_bound(first + 1, last, at);  // the stretch after at's
-          for (uint32_t a = at; a < end; ++next) {
-            const uint32_t b = next < last ? std::min(*next, end) : end;
-            dim(a, b);
-            a = b;
-          }
-        } else {
-          const uint32_t* start = std::upper_bound(first + 1, last, end - 1) - 1;  // end - 1's stretch
-          for (uint32_t b = end;; --start) {
-            const uint32_t a = std::max(*start, at);
-            dim(a, b);
-            if (a == at) break;
-            b = a;
-          }
-        }
+      } else {
+        dimByStretches(*light, r, at, end, value, grid.mirrorX, keepFills ? &out.fills : nullptr, row);
       }
       lo = std::min(lo, from);
       hi = to;
