@@ -644,7 +644,7 @@ class RawOffset {
     // where line lines[l] starts (a fraction of its moved edge), points[l - 1] that point.
     std::vector<uint32_t>& lines = runLines_;
     std::vector<double>& at = runAt_;
-    std::vector<Normal>& points = runPoints_;
+    std::vector<Point2d>& points = runPoints_;
     lines.assign(1, 0);
     at.assign(1, 0.0);
     points.clear();
@@ -678,7 +678,7 @@ class RawOffset {
     run.span = static_cast<uint32_t>(k);
     run.first = static_cast<uint32_t>(envelope_.size());
     run.count = static_cast<uint32_t>(points.size());
-    for (const Normal& p : points) envelope_.push_back(IntPoint(round(p.x), round(p.y)));
+    for (const Point2d& p : points) envelope_.push_back(IntPoint(round(p.x), round(p.y)));
     run.in = (1 - first) * length(from(0), to(0));
     run.segOut = length(from(k), to(k));
     run.out = at.back() * run.segOut;
@@ -703,7 +703,7 @@ class RawOffset {
   std::vector<IntPoint> envelope_;  // the runs' envelope points (runTrim)
   std::vector<uint32_t> runLines_;
   std::vector<double> runAt_;
-  std::vector<Normal> runPoints_;
+  std::vector<Point2d> runPoints_;
   bool hasLowest_ = false;
   IntPoint lowestPoint_;
   std::size_t lowestPath_ = 0;
