@@ -45,12 +45,12 @@ struct MaskImage {
   // between the parts of a plate.
   std::vector<uint32_t> runs, rowRuns;
   bool hasRuns() const { return rowRuns.size() == std::size_t{2} * height && height > 0 && hasExtents(); }
-  // Optional, anti-aliased masks: stretches of one value inside each stored row r's lit extent, as
-  // triples (begin, end, value) in increasing x, none overlapping: pixels[r * width + i] == value for
-  // begin <= i < end, for the triples [rowFills[2r], rowFills[2r] + rowFills[2r + 1]). Not every
-  // constant stretch need be listed. rowFills holds 2 * height entries when known (always with the
-  // extents), else none. The exact-coverage rasterizer keeps the runs it fills between edge pixels, so
-  // the PNG coder does not read the insides of lit regions back.
+  // Optional, anti-aliased masks: stretches of one value of each stored row r (inside its lit extent,
+  // or dark: value 0), as triples (begin, end, value) in increasing x, none overlapping:
+  // pixels[r * width + i] == value for begin <= i < end, for the triples [rowFills[2r],
+  // rowFills[2r] + rowFills[2r + 1]). Not every constant stretch need be listed. rowFills holds
+  // 2 * height entries when known (always with the extents), else none. The exact-coverage rasterizer keeps
+  // the runs it fills between edge pixels, so the PNG coder does not read the insides of lit regions back.
   std::vector<uint32_t> fills, rowFills;
   bool hasFills() const { return rowFills.size() == std::size_t{2} * height && height > 0 && hasExtents(); }
   // Forgets the extents, the runs and the fills: for anyone who changes `pixels` another way.

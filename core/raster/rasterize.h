@@ -219,9 +219,9 @@ LightMap lightMapOf(const MaskImage& map);
 // - lightMap: a light-uniformity map of the grid's size (lightMapOf); every written value v (after the
 //   table) becomes round(v * m / 255), m the map's value at that pixel, as it is written: only lit
 //   pixels are touched, a run between edge pixels with one value per stretch of the map, and those
-//   stretches are listed as fills. The extents are trimmed of pixels dimmed to 0 at their ends (and the
-//   fills to the extents), and valueSum is the sum before the map (the part's area; the map dims the
-//   light, not the part). Not together with `row`.
+//   stretches are listed as fills (one dimmed to 0 too, like the dark stretches between parts). The
+//   extents are trimmed of pixels dimmed to 0 at their ends, and valueSum is the sum before the map
+//   (the part's area; the map dims the light, not the part). Not together with `row`.
 struct LightMap;
 struct CoverageTransfer {
   const uint8_t* table = nullptr;
