@@ -749,21 +749,23 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
   return false;
 }
 
-// Stored pixels [at, end) of row r at `value` dimmed by the light map, one memset per stretch of the
-// map, each stretch of kMinFill pixels or more listed in `fills` (when given) in the order of the pass
-// over the row: backwards when the row is mirrored (the row's fills are reversed after it). Kept out of
-// line: the row loop is hot and this runs only with a light map.
+// Stored pixels [a, b) of a row (dark before) set to `value`, and listed in `fills` (when given) as a
+// stretch of one value when it holds kMinFill pixels or more.
+void putStretch(uint8_t* row, uint32_t a, uint32_t b, uint8_t value, std::vector<uint32_t>* fills) {
+  if (fills && b - a >= kMinFill) fills->insert(fills->end(), {a, b, value});
+  if (value != 0) std::memset(row + a, value, b - a);
+}
+
+// Stored pixels [at, end) of row r at `value` dimmed by the light map, one putStretch per stretch of
+// the map, in the order of the pass over the row: backwards when the row is mirrored (the row's fills
+// are reversed after it). Kept out of line: the row loop is hot and this runs only with a light map.
 [[gnu::noinline]] void dimByStretches(const LightMap& light, uint32_t r, uint32_t at, uint32_t end,
                                       uint8_t value, bool mirrored, std::vector<uint32_t>* fills,
                                       uint8_t* row) {
   const uint8_t* map = light.pixels.data() + static_cast<std::size_t>(r) * light.width;
   const uint32_t* first = light.starts.data() + light.rowFirst[r];
   const uint32_t* last = light.starts.data() + light.rowFirst[r + 1];
-  const auto dim = [&](uint32_t a, uint32_t b) {
-    const uint8_t v = lightValue(value, map[a]);
-    if (fills && b - a >= kMinFill) fills->insert(fills->end(), {a, b, v});
-    if (v != 0) std::memset(row + a, v, b - a);
-  };
+  const auto dim = [&](uint32_t a, uint32_t b) { putStretch(row, a, b, lightValue(value, map[a]), fills); };
   if (!mirrored) {
     const uint32_t* next = std::upper_bound(first + 1, last, at);  // the stretch after at's
     for (uint32_t a = at; a < end; ++next) {
@@ -1109,25 +1111,16 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     uint32_t lo = width, hi = 0;  // lit extent, unmirrored
     uint64_t sum = 0;
     const std::size_t firstFill = out.fills.size();
-    // Stored pixels [a, b) set to `value`, listed as a fill (in the order of the pass over the row, so
-    // reversed below when mirrored).
-    const auto put = [&](uint32_t a, uint32_t b, uint8_t value) {
-      if (keepFills && b - a >= kMinFill) {
-        out.fills.push_back(a);
-        out.fills.push_back(b);
-        out.fills.push_back(value);
-      }
-      if (value != 0) std::memset(row + a, value, b - a);
-    };
+    std::vector<uint32_t>* fills = keepFills ? &out.fills : nullptr;  // in the pass's order: reversed below
     // The unmirrored pixels [from, to) at one value before the light map.
     const auto fill = [&](uint32_t from, uint32_t to, uint8_t value) {
       if (from >= to) return;
       const uint32_t at = grid.mirrorX ? width - to : from, end = at + (to - from);
       if (value == 0 || !lightRow) {
-        put(at, end, value);
+        putStretch(row, at, end, value, fills);
         if (value == 0) return;
       } else {
-        dimByStretches(*light, r, at, end, value, grid.mirrorX, keepFills ? &out.fills : nullptr, row);
+        dimByStretches(*light, r, at, end, value, grid.mirrorX, fills, row);
       }
       lo = std::min(lo, from);
       hi = to;
