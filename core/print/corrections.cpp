@@ -34,9 +34,4 @@ std::array<uint8_t, 256> gammaTable(double gamma) {
   return table;
 }
 
-void applyTable(MaskImage& mask, const std::array<uint8_t, 256>& table) {
-  for (uint8_t& v : mask.pixels) v = table[v];
-  mask.forgetLayout();
-}
-
 }  // namespace toposlice

@@ -1,6 +1,7 @@
 // Printer and material corrections that need no polygon library (issue "Production print settings"):
-// the scaling correction of a model, the elephant-foot schedule over the bottom layers, the
-// anti-aliasing gamma and the display's light-uniformity map. Offsets live in offset/polygon_offset.h.
+// the scaling correction of a model, the elephant-foot schedule over the bottom layers and the
+// anti-aliasing gamma's table. Offsets live in offset/polygon_offset.h; the rasterizer applies the gamma
+// table and the light-uniformity map as it writes each value (core/raster/rasterize.h).
 #pragma once
 
 #include <array>
@@ -8,7 +9,6 @@
 #include <span>
 
 #include "core/mesh/mesh.h"
-#include "core/raster/mask_image.h"
 
 namespace toposlice {
 
@@ -31,8 +31,5 @@ double elephantFootAt(uint32_t k, double amount, uint32_t layers);
 // Table of the anti-aliasing gamma applied to 8-bit coverage v: round(255 * (v / 255)^gamma); gamma = 1
 // is the identity. gamma > 0 (gamma = 0 means binary masks, which the rasterizer makes directly).
 std::array<uint8_t, 256> gammaTable(double gamma);
-
-// Every pixel through `table`. Clears the mask's lit-row extents (a value may become 0).
-void applyTable(MaskImage& mask, const std::array<uint8_t, 256>& table);
 
 }  // namespace toposlice
