@@ -706,7 +706,7 @@ TEST(RasterCoverage, ClusteredRowsEqualBandedRowsOnOverlappingWigglyLoops) {
   // from -2 to 3, crossings inside rows, caps crossing chains; a quarter of them on a lattice.
   std::mt19937 rng(31337);
   std::uniform_real_distribution<double> centre(5, 11), radius(1.5, 5), wiggle(0.01, 0.4);
-  std::size_t banded = 0;
+  std::size_t banded = 0, small = 0;
   for (int trial = 0; trial < 150; ++trial) {
     std::vector<Loop> loops;
     for (int l = 0; l < 2 + trial % 2; ++l) {
@@ -719,9 +719,62 @@ TEST(RasterCoverage, ClusteredRowsEqualBandedRowsOnOverlappingWigglyLoops) {
     const LayerContours layer = makeLayer(loops);
     const PixelGrid grid =
         makeGrid(trial % 4 == 3 ? 0 : 0.1, trial % 4 == 3 ? 0 : -0.07, trial % 2 == 0 ? 1.0 : 0.5, 18, 18);
-    banded += expectClustersEqualBanded({{&layer, 1}}, grid, "trial " + std::to_string(trial)).bandedRows;
+    const RasterScratch s = expectClustersEqualBanded({{&layer, 1}}, grid, "trial " + std::to_string(trial));
+    banded += s.bandedRows;
+    small += s.smallClusters;
   }
   EXPECT_GT(banded, 100u);
+  EXPECT_GT(small, 1000u);  // clusters the proof rejects, decided part by part
+}
+
+// Raw offsets of jagged loops, built as Clipper builds them before its union (as a grown layer's loops
+// are where a detour stays): every edge moved out by d, a mitre at each convex corner (a bevel where
+// it would be long) and a detour b -> v -> a through each concave one. The detours make small loops
+// where the count is 2 and edges that cross inside rows; the clusters holding them are decided part by
+// part and must give the exact coverage and the banded path's bytes (a rounding tie aside), on grids
+// offset, mirrored, and with vertices on the row lines (a lattice).
+TEST(RasterCoverage, RawOffsetDetoursAreDecidedPartByPartExactly) {
+  std::mt19937 rng(99);
+  std::uniform_real_distribution<double> uniform(0, 1);
+  std::size_t small = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    const int n = 30 + 3 * trial;
+    const double d = 0.2 + 0.8 * uniform(rng);
+    Loop loop;
+    for (int i = 0; i < n; ++i) {
+      const double a = 2 * std::numbers::pi * (i + 0.8 * uniform(rng)) / n,
+                   r = 7 + 1.5 * (uniform(rng) - 0.5);
+      loop.push_back({10 + r * std::cos(a), 10 + r * std::sin(a)});
+      if (trial % 3 == 2)
+        loop.back() = {0.25 * std::round(4 * loop.back().x), 0.25 * std::round(4 * loop.back().y)};
+    }
+    const auto normal = [](Point2d p, Point2d q) {  // outward for a counter-clockwise loop
+      const double dx = q.x - p.x, dy = q.y - p.y, l = std::hypot(dx, dy);
+      return Point2d{dy / l, -dx / l};
+    };
+    Loop raw;
+    for (int i = 0; i < n; ++i) {
+      const Point2d p = loop[(i + n - 1) % n], v = loop[i], q = loop[(i + 1) % n];
+      if (p.x == v.x && p.y == v.y) continue;
+      if (q.x == v.x && q.y == v.y) continue;
+      const Point2d n1 = normal(p, v), n2 = normal(v, q);
+      const double turn = (v.x - p.x) * (q.y - v.y) - (v.y - p.y) * (q.x - v.x),
+                   r = 1 + n1.x * n2.x + n1.y * n2.y;
+      if (turn < 0) {  // concave: the detour through the vertex
+        raw.insert(raw.end(), {{v.x + d * n1.x, v.y + d * n1.y}, v, {v.x + d * n2.x, v.y + d * n2.y}});
+      } else if (r > 0.3) {
+        raw.push_back({v.x + d * (n1.x + n2.x) / r, v.y + d * (n1.y + n2.y) / r});
+      } else {
+        raw.insert(raw.end(), {{v.x + d * n1.x, v.y + d * n1.y}, {v.x + d * n2.x, v.y + d * n2.y}});
+      }
+    }
+    const LayerContours layer = makeLayer({raw});
+    PixelGrid grid = makeGrid(trial % 3 == 2 ? 0 : 0.13, trial % 3 == 2 ? 0 : -0.05,
+                              trial % 2 == 0 ? 1.0 : 0.5, trial % 2 == 0 ? 21 : 42, trial % 2 == 0 ? 21 : 42);
+    grid.mirrorY = trial % 4 == 1;
+    small += expectClustersEqualBanded({{&layer, 1}}, grid, "trial " + std::to_string(trial)).smallClusters;
+  }
+  EXPECT_GT(small, 2000u);
 }
 
 TEST(RasterCoverage, OverlappingPartsSideBySideKeepTheirPixelsAlone) {

@@ -548,6 +548,104 @@ void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double
     coverBand(active, ys[b], ys[b + 1], width, scratch, winding0);
 }
 
+// Clusters the cluster proof does not accept and that have at most this many edges go by
+// coverSmallCluster instead of coverRow.
+constexpr std::size_t kMaxSmallCluster = 16;
+
+// One cluster of a row (its own edges, the count left of it `winding0`) that the cluster proof does
+// not accept, decided part by part (rasterize.h): each edge's part in the row is cut where another part
+// crosses it, where an end of another part lies on it (coincident parts start or stop there) and at
+// the height of every horizontal edge inside the row (which may pass over it). Along each piece so cut
+// the count left of it then stays the same (a loop passing through a vertex or turning there does not
+// change it), so it is taken once, on the horizontal line through the piece's middle: `winding0` plus
+// the windings of the parts that cross that line left of it (an edge from v0 up to v1 crosses at y when
+// v0 <= y < v1). Parts at the same u there (coincident) count together and the first of them stands for
+// all. A piece is a boundary of the positive-winding region where the counts left and right of it lie
+// on both sides of 0, and accumulates as accumulateBand's pieces do: exact to rounding, like the banded
+// path (whose different sums may round a value the other way at a tie).
+void coverSmallCluster(std::span<const CoverageEdge> active, double y0, double y1, uint32_t width,
+                       RasterScratch& scratch, int32_t winding0) {
+  const std::size_t n = active.size();
+  assert(n <= kMaxSmallCluster);
+  std::array<double, kMaxSmallCluster> va, vb;
+  std::array<double, 2 * kMaxSmallCluster> flats;  // where a horizontal edge inside the row joins two parts
+  std::size_t flatCount = 0;
+  std::array<std::array<double, 5 * kMaxSmallCluster>, kMaxSmallCluster> cuts;
+  std::array<uint8_t, kMaxSmallCluster> cutCount{};
+  for (std::size_t k = 0; k < n; ++k) {
+    const CoverageEdge& e = active[k];
+    va[k] = std::max(e.v0, y0);
+    vb[k] = std::min(e.v1, y1);
+    if (va[k] > y0 && e.atBottom < 0) flats[flatCount++] = va[k];
+    if (vb[k] < y1 && e.atTop < 0) flats[flatCount++] = vb[k];
+  }
+  for (std::size_t k = 0; k < n; ++k)
+    for (std::size_t f = 0; f < flatCount; ++f)
+      if (flats[f] > va[k] && flats[f] < vb[k]) cuts[k][cutCount[k]++] = flats[f];
+  for (std::size_t k = 0; k < n; ++k) {
+    for (std::size_t l = k + 1; l < n; ++l) {
+      const double a = std::max(va[k], va[l]), b = std::min(vb[k], vb[l]);
+      if (!(b > a)) continue;
+      const double da = edgeU(active[k], a) - edgeU(active[l], a),
+                   db = edgeU(active[k], b) - edgeU(active[l], b);
+      if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
+        const double y = a + (b - a) * (da / (da - db));
+        if (y > a && y < b) {
+          cuts[k][cutCount[k]++] = y;
+          cuts[l][cutCount[l]++] = y;
+        }
+      }
+      // An end of one part on the other (where they start or stop being coincident, or one touches the
+      // other): the other is cut there too.
+      if (da == 0.0) {
+        if (a > va[k]) cuts[k][cutCount[k]++] = a;
+        if (a > va[l]) cuts[l][cutCount[l]++] = a;
+      }
+      if (db == 0.0) {
+        if (b < vb[k]) cuts[k][cutCount[k]++] = b;
+        if (b < vb[l]) cuts[l][cutCount[l]++] = b;
+      }
+    }
+  }
+  double* cells = scratch.cells.data();
+  double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
+  for (std::size_t k = 0; k < n; ++k) {
+    const CoverageEdge& e = active[k];
+    double* first = cuts[k].data();
+    double* last = first + cutCount[k];
+    std::sort(first, last);
+    *last++ = vb[k];
+    double s0 = va[k], u0 = edgeU(e, s0);
+    for (const double* at = first; at != last; ++at) {
+      const double s1 = *at, u1 = edgeU(e, s1);
+      if (!(s1 > s0)) continue;
+      const double ym = 0.5 * (s0 + s1), um = edgeU(e, ym);
+      int32_t left = winding0, here = e.winding;
+      bool leads = true;
+      for (std::size_t f = 0; f < n; ++f) {  // without branches: which parts cross, and where, is data
+        const CoverageEdge& g = active[f];
+        // edgeU(g, ym) where the part crosses the line (v0 <= ym < v1)
+        const double uf =
+            std::clamp(g.u0 + (ym - g.v0) * g.slope, std::min(g.u0, g.u1), std::max(g.u0, g.u1));
+        const bool crosses = (va[f] <= ym) & (ym < vb[f]) & (f != k);
+        const bool same = crosses & (uf == um);
+        left += (crosses & (uf < um)) ? g.winding : 0;
+        here += same ? g.winding : 0;
+        leads = leads & !(same & (f < k));
+      }
+      const int32_t right = left + here;
+      if (leads && (left <= 0) != (right <= 0)) {
+        addBoundarySegment(u0, u1, right > 0 ? s1 - s0 : s0 - s1, width, cells);
+        lo = std::min({lo, u0, u1});
+        hi = std::max({hi, u0, u1});
+      }
+      s0 = s1;
+      u0 = u1;
+    }
+  }
+  if (lo <= hi) scratch.spans.push_back(segmentCells(lo, hi, width));
+}
+
 // Whether two parts of a row's edges meet (cross, touch or overlap), decided on their bounding boxes
 // and orientations; collinear parts with overlapping boxes count as meeting. Used only to prove that
 // parts do not meet, so an answer of "meet" where they do not merely sends the row to coverRow.
@@ -742,10 +840,16 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
   std::size_t r = 0;
   for (const RowCluster& c : clusters) {
     if (c.accepted) continue;
-    coverRow(std::span<const CoverageEdge>(own).subspan(ownStart[r], ownStart[r + 1] - ownStart[r]), y0, y1,
-             width, scratch, c.left);
+    const std::span<const CoverageEdge> mine =
+        std::span<const CoverageEdge>(own).subspan(ownStart[r], ownStart[r + 1] - ownStart[r]);
+    if (mine.size() <= kMaxSmallCluster) {
+      coverSmallCluster(mine, y0, y1, width, scratch, c.left);
+      ++scratch.smallClusters;
+    } else
+      coverRow(mine, y0, y1, width, scratch, c.left);
     ++r;
   }
+  sortNearlySorted(scratch.spans, [](const CellSpan& s) { return s.begin; });
   return false;
 }
 

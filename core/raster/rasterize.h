@@ -36,8 +36,14 @@
 //   loop lies inside the row, and that the count stays in {0, 1} along the row's bottom and top lines
 //   (every region between the parts then touches one of those lines). A cluster where any of this fails
 //   (overlapping loops, crossings, a horizontal edge inside the row, whose u range then joins the
-//   cluster, a loop inside one row) takes the banded path below with its own edges alone, starting from
-//   the count left of it, so its pixels do not depend on other parts in the row (a plate's other parts).
+//   cluster, a loop inside one row) is decided with its own edges alone, starting from the count left
+//   of it, so its pixels do not depend on other parts in the row (a plate's other parts). With at most
+//   16 edges (a grown layer's detour, two loops crossing), part by part: each edge's part in the row is
+//   cut where another part crosses it, where an end of another part lies on it and at the height of
+//   every horizontal edge inside the row; then nothing crosses a piece and the count beside it is the
+//   same all along it, so the piece is a boundary where the counts just left and just right of it,
+//   taken along the horizontal line through its middle (half-open, as the sample lines), lie on both
+//   sides of 0 (coincident pieces decide together). Larger clusters take the banded path below.
 //   Banded path: when the row's edges link, vertex to vertex, into chains that each run from the row's
 //   bottom to its top with one winding, and neighbouring chains (ordered at the bottom) never swap
 //   sides (checked at every vertex of either), the order is the same at every y of the row: the
@@ -192,8 +198,9 @@ struct RasterScratch {
   // Tests only: every row of rasterizeCoverage by the banded path (coverRow), none by the clusters.
   bool alwaysBanded = false;
   // Rows of rasterizeCoverage done by clusters alone (of them, rows with a cluster that is not one
-  // chain) and rows where some cluster (or, with alwaysBanded, the row) took the banded path, summed.
-  std::size_t clusteredRows = 0, extremeRows = 0, bandedRows = 0;
+  // chain) and rows where some cluster (or, with alwaysBanded, the row) took the banded path, summed;
+  // and clusters the cluster proof did not accept that were decided part by part (small ones).
+  std::size_t clusteredRows = 0, extremeRows = 0, bandedRows = 0, smallClusters = 0;
 };
 
 // A light-uniformity map: relative intensities (0-255) in a mask's stored order, with the stretches of
