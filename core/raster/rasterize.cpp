@@ -567,10 +567,25 @@ void coverSmallCluster(std::span<const CoverageEdge> active, double y0, double y
                        RasterScratch& scratch, int32_t winding0) {
   const std::size_t n = active.size();
   assert(n <= kMaxSmallCluster);
+  if (n == 1) {  // one part alone (next to a horizontal edge, or inside another loop): nothing to cut
+    const CoverageEdge& e = active[0];
+    const double va = std::max(e.v0, y0), vb = std::min(e.v1, y1);
+    const int32_t right = winding0 + e.winding;
+    if (!(vb > va) || (winding0 <= 0) == (right <= 0)) return;
+    const double ua = edgeU(e, va), ub = edgeU(e, vb);
+    addBoundarySegment(ua, ub, right > 0 ? vb - va : va - vb, width, scratch.cells.data());
+    scratch.spans.push_back(segmentCells(std::min(ua, ub), std::max(ua, ub), width));
+    return;
+  }
   std::array<double, kMaxSmallCluster> va, vb;
   std::array<double, 2 * kMaxSmallCluster> flats;  // where a horizontal edge inside the row joins two parts
   std::size_t flatCount = 0;
-  std::array<std::array<double, 5 * kMaxSmallCluster>, kMaxSmallCluster> cuts;
+  // Piece k's cuts: cuts[k * stride, k * stride + cutCount[k]) (crossings, ends on it, horizontal
+  // edges: at most 5 n - 5), then its top.
+  const std::size_t stride = 5 * n;
+  if (scratch.smallCuts.size() < n * stride) scratch.smallCuts.resize(n * stride);
+  double* const cutStore = scratch.smallCuts.data();
+  const auto cuts = [cutStore, stride](std::size_t k) { return cutStore + k * stride; };
   std::array<uint8_t, kMaxSmallCluster> cutCount{};
   for (std::size_t k = 0; k < n; ++k) {
     const CoverageEdge& e = active[k];
@@ -581,7 +596,7 @@ void coverSmallCluster(std::span<const CoverageEdge> active, double y0, double y
   }
   for (std::size_t k = 0; k < n; ++k)
     for (std::size_t f = 0; f < flatCount; ++f)
-      if (flats[f] > va[k] && flats[f] < vb[k]) cuts[k][cutCount[k]++] = flats[f];
+      if (flats[f] > va[k] && flats[f] < vb[k]) cuts(k)[cutCount[k]++] = flats[f];
   for (std::size_t k = 0; k < n; ++k) {
     for (std::size_t l = k + 1; l < n; ++l) {
       const double a = std::max(va[k], va[l]), b = std::min(vb[k], vb[l]);
@@ -591,19 +606,19 @@ void coverSmallCluster(std::span<const CoverageEdge> active, double y0, double y
       if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
         const double y = a + (b - a) * (da / (da - db));
         if (y > a && y < b) {
-          cuts[k][cutCount[k]++] = y;
-          cuts[l][cutCount[l]++] = y;
+          cuts(k)[cutCount[k]++] = y;
+          cuts(l)[cutCount[l]++] = y;
         }
       }
       // An end of one part on the other (where they start or stop being coincident, or one touches the
       // other): the other is cut there too.
       if (da == 0.0) {
-        if (a > va[k]) cuts[k][cutCount[k]++] = a;
-        if (a > va[l]) cuts[l][cutCount[l]++] = a;
+        if (a > va[k]) cuts(k)[cutCount[k]++] = a;
+        if (a > va[l]) cuts(l)[cutCount[l]++] = a;
       }
       if (db == 0.0) {
-        if (b < vb[k]) cuts[k][cutCount[k]++] = b;
-        if (b < vb[l]) cuts[l][cutCount[l]++] = b;
+        if (b < vb[k]) cuts(k)[cutCount[k]++] = b;
+        if (b < vb[l]) cuts(l)[cutCount[l]++] = b;
       }
     }
   }
@@ -611,7 +626,7 @@ void coverSmallCluster(std::span<const CoverageEdge> active, double y0, double y
   double lo = std::numeric_limits<double>::max(), hi = std::numeric_limits<double>::lowest();
   for (std::size_t k = 0; k < n; ++k) {
     const CoverageEdge& e = active[k];
-    double* first = cuts[k].data();
+    double* first = cuts(k);
     double* last = first + cutCount[k];
     std::sort(first, last);
     *last++ = vb[k];

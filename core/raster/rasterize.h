@@ -193,6 +193,7 @@ struct RasterScratch {
   std::vector<double> rowCuts;        // where chains start or end inside the row
   std::vector<ChainCursor> chains;    // chains spanning the current band
   std::vector<double> bandYs;         // sub-band limits of the current row
+  std::vector<double> smallCuts;      // where a small cluster's parts are cut (coverSmallCluster)
   std::vector<double> cells;          // area/cover accumulation of the row (width + 2)
   std::vector<CellSpan> spans;        // cell ranges touched in the row
   // Tests only: every row of rasterizeCoverage by the banded path (coverRow), none by the clusters.
