@@ -271,10 +271,13 @@ class RawOffset {
     return std::span<const IntPoint>(points_).subspan(starts_[i], starts_[i + 1] - starts_[i]);
   }
 
-  static Normal unitNormal(const IntPoint& a, const IntPoint& b) {
+  // The unit normal of a -> b (zero where a == b), and the edge's length in `length`.
+  static Normal unitNormal(const IntPoint& a, const IntPoint& b, double& length) {
+    length = 0;
     if (a.X == b.X && a.Y == b.Y) return {0, 0};
     double dx = static_cast<double>(b.X - a.X), dy = static_cast<double>(b.Y - a.Y);
-    const double f = 1 / std::sqrt(dx * dx + dy * dy);
+    length = std::sqrt(dx * dx + dy * dy);
+    const double f = 1 / length;
     dx *= f;
     dy *= f;
     return {dy, -dx};
@@ -309,7 +312,9 @@ class RawOffset {
   void offsetPath(std::span<const IntPoint> src) {
     const std::size_t n = src.size();
     normals_.resize(n);
-    for (std::size_t j = 0; j < n; ++j) normals_[j] = unitNormal(src[j], src[j + 1 == n ? 0 : j + 1]);
+    lengths_.resize(n);
+    for (std::size_t j = 0; j < n; ++j)
+      normals_[j] = unitNormal(src[j], src[j + 1 == n ? 0 : j + 1], lengths_[j]);
     kinds_.resize(n);
     dest_.clear();
     detours_.clear();
@@ -375,7 +380,6 @@ class RawOffset {
       const std::size_t i = detours_[t];
       const IntPoint& A = dest_[i == 0 ? m - 1 : i - 1];
       const IntPoint& b = dest_[i];
-      const IntPoint& v = dest_[i + 1];
       const IntPoint& a = dest_[i + 2];
       const IntPoint& B = dest_[i + 3 >= m ? i + 3 - m : i + 3];
       const std::size_t j = corners_[t];
@@ -394,12 +398,8 @@ class RawOffset {
       corner.out = c.u * len2;
       corner.segOut = len2;
       // Every vertex adds at least one point, so A comes from the vertex before and B from the one after.
-      const IntPoint& before = src[j == 0 ? n - 1 : j - 1];
-      const IntPoint& after = src[j + 1 == n ? 0 : j + 1];
-      const double bx = static_cast<double>(v.X - before.X), by = static_cast<double>(v.Y - before.Y);
-      const double ax = static_cast<double>(after.X - v.X), ay = static_cast<double>(after.Y - v.Y);
-      const double edgeIn = std::sqrt(bx * bx + by * by);
-      corner.edgeOut = std::sqrt(ax * ax + ay * ay);
+      const double edgeIn = lengths_[j == 0 ? n - 1 : j - 1];
+      corner.edgeOut = lengths_[j];
       // 1 unit of slack for the rounding of b and a to whole units.
       const double reach =
           std::max(std::max(corner.in, corner.out), std::fabs(delta_ * c.cross) / (len1 * len2)) + 1;
@@ -481,7 +481,7 @@ class RawOffset {
     const Normal nv = normals_[forward ? j : w], nx = normals_[forward ? w : x];
     const double d = std::fabs(delta_), sign = delta_ < 0 ? -1.0 : 1.0;
     const double ex = static_cast<double>(src[w].X - src[j].X), ey = static_cast<double>(src[w].Y - src[j].Y);
-    const double len = std::sqrt(ex * ex + ey * ey);
+    const double len = lengths_[forward ? j : w];
     if (!(len > 0)) return false;
     const double qx = static_cast<double>(q.X - src[j].X), qy = static_cast<double>(q.Y - src[j].Y);
     const double s = (qx * ex + qy * ey) / len, h = sign * (qx * nv.x + qy * nv.y);
@@ -489,7 +489,7 @@ class RawOffset {
     if (s <= len) return true;
     if (!sweepsItsKite(w)) return false;
     const double fx = static_cast<double>(src[x].X - src[w].X), fy = static_cast<double>(src[x].Y - src[w].Y);
-    const double flen = std::sqrt(fx * fx + fy * fy);
+    const double flen = lengths_[forward ? w : x];
     if (!(flen > 0)) return false;
     const double rx = static_cast<double>(q.X - src[w].X), ry = static_cast<double>(q.Y - src[w].Y);
     return sign * (rx * nx.x + ry * nx.y) <= d + 1 && (rx * fx + ry * fy) / flen <= flen;
@@ -695,7 +695,8 @@ class RawOffset {
   std::vector<IntPoint> points_;
   std::vector<uint32_t> starts_{0};
   std::vector<Normal> normals_;
-  std::vector<uint8_t> kinds_;  // each source vertex's join: kStraight, kDetour, kMitre or kSquare
+  std::vector<double> lengths_;  // of each edge of the path (normals_'s edges)
+  std::vector<uint8_t> kinds_;   // each source vertex's join: kStraight, kDetour, kMitre or kSquare
   Path dest_, trimmed_;
   std::vector<uint32_t> detours_;  // where each concave corner's three points start in dest_
   std::vector<uint32_t> corners_;  // and the source vertex of each
