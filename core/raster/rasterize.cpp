@@ -562,9 +562,10 @@ constexpr std::size_t kMaxSmallCluster = 16;
 // v0 <= y < v1). Parts at the same u there (coincident) count together and the first of them stands for
 // all. A piece is a boundary of the positive-winding region where the counts left and right of it lie
 // on both sides of 0, and accumulates as accumulateBand's pieces do: exact to rounding, like the banded
-// path (whose different sums may round a value the other way at a tie).
-void coverSmallCluster(std::span<const CoverageEdge> active, double y0, double y1, uint32_t width,
-                       RasterScratch& scratch, int32_t winding0) {
+// path (whose different sums may round a value the other way at a tie). Kept out of line, as the
+// clusters' row loop is hot and most rows never come here.
+[[gnu::noinline]] void coverSmallCluster(std::span<const CoverageEdge> active, double y0, double y1,
+                                         uint32_t width, RasterScratch& scratch, int32_t winding0) {
   const std::size_t n = active.size();
   assert(n <= kMaxSmallCluster);
   if (n == 1) {  // one part alone (next to a horizontal edge, or inside another loop): nothing to cut
