@@ -307,13 +307,16 @@ void BM_GrowLayer(benchmark::State& state) {
 }
 BENCHMARK(BM_GrowLayer)->Arg(25)->Arg(50)->Arg(75)->Unit(benchmark::kMicrosecond);
 
-// The grown layer's anti-aliased mask (the rows that the detours left in it send to the banded path).
+// The grown layer's anti-aliased mask. Args: height (25, 50, 75 %); 0: the raw loops (the clusters the
+// detours leave in them are decided apart), 1: their union by Clipper (no detours: beside 0, what the
+// detours cost the rasterizer). Counters: rows with a cluster decided apart, the loops' points.
 void BM_RasterizeGrownLayer(benchmark::State& state) {
   const MaskFixture& f = maskFixture();
   const ContourSet set{&f.layers[state.range(0) / 25 - 1], 1};
-  LayerContours grown;
+  LayerContours grown, united;
   rawCorrectedLoops({&set, 1}, {0.05, 0, 0}, 0.0, grown);
-  const ContourSet grownSet{&grown, 1};
+  if (state.range(1) == 1) unitePositive(grown, 0.0, united);
+  const ContourSet grownSet{state.range(1) == 1 ? &united : &grown, 1};
   RasterScratch raster;
   MaskImage mask;
   for (auto _ : state) {
@@ -322,30 +325,9 @@ void BM_RasterizeGrownLayer(benchmark::State& state) {
   }
   state.counters["banded_rows"] =
       static_cast<double>(raster.bandedRows) / static_cast<double>(state.iterations());
+  state.counters["points"] = static_cast<double>(grownSet.layer->points.size());
 }
-BENCHMARK(BM_RasterizeGrownLayer)->Arg(25)->Arg(50)->Arg(75)->Unit(benchmark::kMicrosecond);
-
-// The same grown layer after Clipper's union (no detours left): beside BM_RasterizeGrownLayer, what the
-// detours cost the rasterizer. Counter: the points of the raw loops and of their union.
-void BM_RasterizeUnitedLayer(benchmark::State& state) {
-  const MaskFixture& f = maskFixture();
-  const ContourSet set{&f.layers[state.range(0) / 25 - 1], 1};
-  LayerContours grown, united;
-  rawCorrectedLoops({&set, 1}, {0.05, 0, 0}, 0.0, grown);
-  unitePositive(grown, 0.0, united);
-  const ContourSet unitedSet{&united, 1};
-  RasterScratch raster;
-  MaskImage mask;
-  for (auto _ : state) {
-    rasterizeCoverage({&unitedSet, 1}, f.grid, mask, raster);
-    benchmark::DoNotOptimize(mask.pixels.data());
-  }
-  state.counters["banded_rows"] =
-      static_cast<double>(raster.bandedRows) / static_cast<double>(state.iterations());
-  state.counters["raw_points"] = static_cast<double>(grown.points.size());
-  state.counters["united_points"] = static_cast<double>(united.points.size());
-}
-BENCHMARK(BM_RasterizeUnitedLayer)->Arg(25)->Arg(50)->Arg(75)->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_RasterizeGrownLayer)->ArgsProduct({{25, 50, 75}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 // encodeMaskPng of one layer; args: height (25, 50, 75 %), anti-aliased (0, 1), code (0 smallest: the
 // default, dynamic for these layers; 1 fixed). Counter: PNG bytes.
