@@ -397,7 +397,8 @@ class RawOffset {
       corner.in = (1 - c.s) * len1;
       corner.out = c.u * len2;
       corner.segOut = len2;
-      // Every vertex adds at least one point, so A comes from the vertex before and B from the one after.
+      // The original edges before and after the corner (every vertex adds at least one point, so A
+      // comes from the vertex before and B from the one after).
       const double edgeIn = lengths_[j == 0 ? n - 1 : j - 1];
       corner.edgeOut = lengths_[j];
       // 1 unit of slack for the rounding of b and a to whole units.

@@ -861,8 +861,9 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
     if (mine.size() <= kMaxSmallCluster) {
       coverSmallCluster(mine, y0, y1, width, scratch, c.left);
       ++scratch.smallClusters;
-    } else
+    } else {
       coverRow(mine, y0, y1, width, scratch, c.left);
+    }
     ++r;
   }
   sortNearlySorted(scratch.spans, [](const CellSpan& s) { return s.begin; });
