@@ -731,12 +731,13 @@ TEST(RasterCoverage, ClusteredRowsEqualBandedRowsOnOverlappingWigglyLoops) {
 // are where a detour stays): every edge moved out by d, a mitre at each convex corner (a bevel where
 // it would be long) and a detour b -> v -> a through each concave one. The detours make small loops
 // where the count is 2 and edges that cross inside rows; the clusters holding them are decided part by
-// part and must give the exact coverage and the banded path's bytes (a rounding tie aside), on grids
-// offset, mirrored, and with vertices on the row lines (a lattice).
+// part, or, where the count is at least 1 all round them, add nothing, and must give the exact
+// coverage and the banded path's bytes (a rounding tie aside), on grids offset, mirrored, and with
+// vertices on the row lines (a lattice).
 TEST(RasterCoverage, RawOffsetDetoursAreDecidedPartByPartExactly) {
   std::mt19937 rng(99);
   std::uniform_real_distribution<double> uniform(0, 1);
-  std::size_t small = 0;
+  std::size_t small = 0, interior = 0;
   for (int trial = 0; trial < 60; ++trial) {
     const int n = 30 + 3 * trial;
     const double d = 0.2 + 0.8 * uniform(rng);
@@ -772,9 +773,12 @@ TEST(RasterCoverage, RawOffsetDetoursAreDecidedPartByPartExactly) {
     PixelGrid grid = makeGrid(trial % 3 == 2 ? 0 : 0.13, trial % 3 == 2 ? 0 : -0.05,
                               trial % 2 == 0 ? 1.0 : 0.5, trial % 2 == 0 ? 21 : 42, trial % 2 == 0 ? 21 : 42);
     grid.mirrorY = trial % 4 == 1;
-    small += expectClustersEqualBanded({{&layer, 1}}, grid, "trial " + std::to_string(trial)).smallClusters;
+    const RasterScratch s = expectClustersEqualBanded({{&layer, 1}}, grid, "trial " + std::to_string(trial));
+    small += s.smallClusters;
+    interior += s.interiorClusters;
   }
   EXPECT_GT(small, 2000u);
+  EXPECT_GT(interior, 1000u);  // a detour's tip inside the grown region: the count 1 or 2 all round
 }
 
 TEST(RasterCoverage, OverlappingPartsSideBySideKeepTheirPixelsAlone) {

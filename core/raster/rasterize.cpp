@@ -679,11 +679,11 @@ bool partsMeet(const CoverageRowPiece& p, const CoverageRowPiece& q) {
 }
 
 // The winding just inside one of the row's lines (its bottom, y0, or its top, y1), left to right over
-// one cluster's crossings of it, starting from `winding` left of the cluster: false if it leaves
-// {0, 1} anywhere, else the winding right of the cluster in `winding`. Crossings at the same u and
-// slope (coincident parts) are summed before the test; at the same u they are ordered by the u they
-// reach just inside the row.
-bool lineWindings(std::vector<LineCrossing>& line, int32_t& winding) {
+// one cluster's crossings of it, starting from `winding` left of the cluster: the lowest and highest
+// count it takes there, and the winding right of the cluster in `winding`. Crossings at the same u and
+// slope (coincident parts) are summed before the count is taken; at the same u they are ordered by the
+// u they reach just inside the row.
+void lineWindings(std::vector<LineCrossing>& line, int32_t& winding, int32_t& lowest, int32_t& highest) {
   sortNearlySortedBy(line, [](const LineCrossing& a, const LineCrossing& b) {
     return a.u < b.u || (a.u == b.u && a.slope < b.slope);
   });
@@ -693,9 +693,9 @@ bool lineWindings(std::vector<LineCrossing>& line, int32_t& winding) {
       winding += line[i].winding;
       ++i;
     } while (i < line.size() && line[i].u == line[group].u && line[i].slope == line[group].slope);
-    if (winding < 0 || winding > 1) return false;
+    lowest = std::min(lowest, winding);
+    highest = std::max(highest, winding);
   }
-  return true;
 }
 
 // Adds cluster `b`, which follows `a` in the row's pieces, to `a`.
@@ -787,10 +787,10 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
 
   int32_t winding = 0;  // left of the cluster
   std::vector<LineCrossing>& line = scratch.lineCrossings;
-  // A cluster that is not one chain: no two parts meet except loop neighbours, and the counts along
-  // both lines stay in {0, 1} (from `winding`, the count left of it) and agree right of it.
-  const auto acceptedExtremes = [&](const RowCluster& c) {
-    if (winding < 0 || winding > 1) return false;  // right of a cluster that coverRow covers
+  // A cluster that is not one chain: whether no two parts meet except loop neighbours and the counts
+  // along both lines (from `winding`, the count left of it) agree right of it; if so, the lowest and
+  // highest count along them.
+  const auto lineCounts = [&](const RowCluster& c, int32_t& lowest, int32_t& highest) {
     for (uint32_t a = c.begin; a < c.end; ++a) {
       const CoverageEdge& e = edgeAt(pieces[a].edge);
       for (uint32_t b = a + 1; b < c.end; ++b) {
@@ -800,22 +800,29 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
       }
     }
     int32_t bottom = winding, top = winding;
+    lowest = highest = winding;
     line.clear();
     for (uint32_t a = c.begin; a < c.end; ++a)
       if (pieces[a].va == y0)
         line.push_back({pieces[a].ua, edgeAt(pieces[a].edge).slope, edgeAt(pieces[a].edge).winding});
-    if (!lineWindings(line, bottom)) return false;
+    lineWindings(line, bottom, lowest, highest);
     line.clear();
     for (uint32_t a = c.begin; a < c.end; ++a)
       if (pieces[a].vb == y1)
         line.push_back({pieces[a].ub, -edgeAt(pieces[a].edge).slope, edgeAt(pieces[a].edge).winding});
-    return lineWindings(line, top) && top == bottom;
+    lineWindings(line, top, lowest, highest);
+    return top == bottom;
   };
   bool extremes = false, allClustered = true;
   for (RowCluster& c : clusters) {
     c.left = winding;
-    c.accepted = !c.loop && (c.chain() ? winding == (c.winding > 0 ? 0 : 1) : acceptedExtremes(c));
-    allClustered = allClustered && c.accepted;
+    // A chain's count is `winding` left of it and `winding` plus its winding right of it.
+    int32_t lowest = std::min(winding, winding + c.winding), highest = std::max(winding, winding + c.winding);
+    const bool decided = !c.loop && (c.chain() || lineCounts(c, lowest, highest));
+    c.accepted = decided && lowest >= 0 && highest <= 1;
+    c.interior = decided && lowest >= 1 && !c.accepted;
+    scratch.interiorClusters += c.interior ? 1 : 0;
+    allClustered = allClustered && (c.accepted || c.interior);
     extremes = extremes || (c.accepted && !c.chain());
     winding += c.net;
   }
@@ -827,6 +834,7 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
   own.clear();
   ownStart.clear();
   for (const RowCluster& c : clusters) {
+    if (c.interior) continue;  // the count is at least 1 on both sides of every part: no boundary
     if (!c.accepted) {
       ownStart.push_back(static_cast<uint32_t>(own.size()));
       for (uint32_t k = c.begin; k < c.end; ++k) own.push_back(edgeAt(pieces[k].edge));
@@ -855,7 +863,7 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
   ownStart.push_back(static_cast<uint32_t>(own.size()));
   std::size_t r = 0;
   for (const RowCluster& c : clusters) {
-    if (c.accepted) continue;
+    if (c.accepted || c.interior) continue;
     const std::span<const CoverageEdge> mine =
         std::span<const CoverageEdge>(own).subspan(ownStart[r], ownStart[r + 1] - ownStart[r]);
     if (mine.size() <= kMaxSmallCluster) {

@@ -34,7 +34,9 @@
 //   chain of one winding from the row's bottom to its top, or, for clusters holding local extremes of
 //   the loops, by checking that no two parts meet except loop neighbours at their shared vertex, that no
 //   loop lies inside the row, and that the count stays in {0, 1} along the row's bottom and top lines
-//   (every region between the parts then touches one of those lines). A cluster where any of this fails
+//   (every region between the parts then touches one of those lines). Where the same checks find the
+//   count at least 1 all round instead (a grown layer's detour tip inside the grown region: counts 1
+//   and 2), no part is a boundary and the cluster adds nothing. A cluster where any of this fails
 //   (overlapping loops, crossings, a horizontal edge inside the row, whose u range then joins the
 //   cluster, a loop inside one row) is decided with its own edges alone, starting from the count left
 //   of it, so its pixels do not depend on other parts in the row (a plate's other parts). With at most
@@ -138,6 +140,7 @@ struct RowCluster {
   int32_t left = 0;       // the count left of the cluster
   int32_t net = 0;        // the count's change across it (its parts' windings along the row's bottom)
   bool accepted = false;  // the count provably stays in {0, 1}: accumulated without bands
+  bool interior = false;  // the count provably stays at least 1: no part is a boundary
   bool chain() const { return winding != 0 && continued && bottoms == 1 && tops == 1 && inside == 0; }
 };
 
@@ -202,6 +205,7 @@ struct RasterScratch {
   // chain) and rows where some cluster (or, with alwaysBanded, the row) took the banded path, summed;
   // and clusters the cluster proof did not accept that were decided part by part (small ones).
   std::size_t clusteredRows = 0, extremeRows = 0, bandedRows = 0, smallClusters = 0;
+  std::size_t interiorClusters = 0;  // clusters with the count at least 1 all round: nothing to add
 };
 
 // A light-uniformity map: relative intensities (0-255) in a mask's stored order, with the stretches of
