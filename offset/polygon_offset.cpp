@@ -619,7 +619,7 @@ class RawOffset {
       if (j < k && height(j, vertex(k + 1)) < d * (1 - dot(nk, normal(j))) + 1) return;
     }
     const IntPoint &v0 = vertex(0), &vk = vertex(k);
-    const double l0 = length(v0, vertex(1)), lk = length(vk, vertex(k + 1));
+    const double l0 = lengths_[j0 % n], lk = lengths_[(j0 + k) % n];  // edges 0 and k
     if (!(l0 > 0 && lk > 0)) return;
     const double u0x = static_cast<double>(vertex(1).X - v0.X) / l0,
                  u0y = static_cast<double>(vertex(1).Y - v0.Y) / l0;
