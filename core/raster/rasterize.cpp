@@ -578,7 +578,9 @@ constexpr std::size_t kMaxSmallCluster = 16;
     scratch.spans.push_back(segmentCells(std::min(ua, ub), std::max(ua, ub), width));
     return;
   }
-  std::array<double, kMaxSmallCluster> va, vb;
+  // The parts, as the crossing counts below read them: its v range in the row, and edgeU's terms.
+  std::array<double, kMaxSmallCluster> va, vb, u0s, v0s, slopes, uLows, uHighs;
+  std::array<int32_t, kMaxSmallCluster> windings;
   std::array<double, 2 * kMaxSmallCluster> flats;  // where a horizontal edge inside the row joins two parts
   std::size_t flatCount = 0;
   // Piece k's cuts: cuts[k * stride, k * stride + cutCount[k]) (crossings, ends on it, horizontal
@@ -592,6 +594,12 @@ constexpr std::size_t kMaxSmallCluster = 16;
     const CoverageEdge& e = active[k];
     va[k] = std::max(e.v0, y0);
     vb[k] = std::min(e.v1, y1);
+    u0s[k] = e.u0;
+    v0s[k] = e.v0;
+    slopes[k] = e.slope;
+    uLows[k] = std::min(e.u0, e.u1);
+    uHighs[k] = std::max(e.u0, e.u1);
+    windings[k] = e.winding;
     if (va[k] > y0 && e.atBottom < 0) flats[flatCount++] = va[k];
     if (vb[k] < y1 && e.atTop < 0) flats[flatCount++] = vb[k];
   }
@@ -636,21 +644,19 @@ constexpr std::size_t kMaxSmallCluster = 16;
       const double s1 = *at, u1 = edgeU(e, s1);
       if (!(s1 > s0)) continue;
       const double ym = 0.5 * (s0 + s1), um = edgeU(e, ym);
-      int32_t left = winding0, here = e.winding;
-      bool leads = true;
+      int32_t left = winding0, here = e.winding, follows = 0;
       for (std::size_t f = 0; f < n; ++f) {  // without branches: which parts cross, and where, is data
-        const CoverageEdge& g = active[f];
-        // edgeU(g, ym) where the part crosses the line (v0 <= ym < v1)
-        const double uf =
-            std::clamp(g.u0 + (ym - g.v0) * g.slope, std::min(g.u0, g.u1), std::max(g.u0, g.u1));
-        const bool crosses = (va[f] <= ym) & (ym < vb[f]) & (f != k);
-        const bool same = crosses & (uf == um);
-        left += (crosses & (uf < um)) ? g.winding : 0;
-        here += same ? g.winding : 0;
-        leads = leads & !(same & (f < k));
+        // edgeU(part f, ym) where the part crosses the line (v0 <= ym < v1)
+        const double uf = std::clamp(u0s[f] + (ym - v0s[f]) * slopes[f], uLows[f], uHighs[f]);
+        const int32_t crosses = static_cast<int32_t>(va[f] <= ym) & static_cast<int32_t>(ym < vb[f]) &
+                                static_cast<int32_t>(f != k);
+        const int32_t same = crosses & static_cast<int32_t>(uf == um);
+        left += windings[f] & -(crosses & static_cast<int32_t>(uf < um));
+        here += windings[f] & -same;
+        follows |= same & static_cast<int32_t>(f < k);
       }
       const int32_t right = left + here;
-      if (leads && (left <= 0) != (right <= 0)) {
+      if (follows == 0 && (left <= 0) != (right <= 0)) {
         addBoundarySegment(u0, u1, right > 0 ? s1 - s0 : s0 - s1, width, cells);
         lo = std::min({lo, u0, u1});
         hi = std::max({hi, u0, u1});
