@@ -1,6 +1,7 @@
 #include "core/raster/rasterize.h"
 
 #include <algorithm>
+#include <bit>
 #include <cassert>
 #include <cmath>
 #include <cstring>
@@ -548,6 +549,12 @@ void coverBandByVertices(std::span<const CoverageEdge> active, double ya, double
     coverBand(active, ys[b], ys[b + 1], width, scratch, winding0);
 }
 
+// a where `take`, else b, without a branch.
+inline double pick(bool take, double a, double b) {
+  const uint64_t mask = 0 - static_cast<uint64_t>(take);
+  return std::bit_cast<double>((std::bit_cast<uint64_t>(a) & mask) | (std::bit_cast<uint64_t>(b) & ~mask));
+}
+
 // Clusters the cluster proof does not accept and that have at most this many edges go by
 // coverSmallCluster instead of coverRow.
 constexpr std::size_t kMaxSmallCluster = 16;
@@ -579,8 +586,13 @@ constexpr std::size_t kMaxSmallCluster = 16;
     return;
   }
   // The parts, as the crossing counts below read them: its v range in the row, and edgeU's terms.
-  std::array<double, kMaxSmallCluster> va, vb, u0s, v0s, slopes, uLows, uHighs;
+  std::array<double, kMaxSmallCluster> va, vb, u0s, v0s, u1s, v1s, slopes, uLows, uHighs;
   std::array<int32_t, kMaxSmallCluster> windings;
+  // edgeU(active[k], v), its ends chosen by masks rather than branches.
+  const auto uAt = [&](std::size_t k, double v) {
+    const double inside = std::clamp(u0s[k] + (v - v0s[k]) * slopes[k], uLows[k], uHighs[k]);
+    return pick(v <= v0s[k], u0s[k], pick(v >= v1s[k], u1s[k], inside));
+  };
   std::array<double, 2 * kMaxSmallCluster> flats;  // where a horizontal edge inside the row joins two parts
   std::size_t flatCount = 0;
   // Piece k's cuts: cuts[k * stride, k * stride + cutCount[k]) (crossings, ends on it, horizontal
@@ -596,6 +608,8 @@ constexpr std::size_t kMaxSmallCluster = 16;
     vb[k] = std::min(e.v1, y1);
     u0s[k] = e.u0;
     v0s[k] = e.v0;
+    u1s[k] = e.u1;
+    v1s[k] = e.v1;
     slopes[k] = e.slope;
     uLows[k] = std::min(e.u0, e.u1);
     uHighs[k] = std::max(e.u0, e.u1);
@@ -610,8 +624,7 @@ constexpr std::size_t kMaxSmallCluster = 16;
     for (std::size_t l = k + 1; l < n; ++l) {
       const double a = std::max(va[k], va[l]), b = std::min(vb[k], vb[l]);
       if (!(b > a)) continue;
-      const double da = edgeU(active[k], a) - edgeU(active[l], a),
-                   db = edgeU(active[k], b) - edgeU(active[l], b);
+      const double da = uAt(k, a) - uAt(l, a), db = uAt(k, b) - uAt(l, b);
       if ((da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0)) {
         const double y = a + (b - a) * (da / (da - db));
         if (y > a && y < b) {
@@ -639,11 +652,11 @@ constexpr std::size_t kMaxSmallCluster = 16;
     double* last = first + cutCount[k];
     std::sort(first, last);
     *last++ = vb[k];
-    double s0 = va[k], u0 = edgeU(e, s0);
+    double s0 = va[k], u0 = uAt(k, s0);
     for (const double* at = first; at != last; ++at) {
-      const double s1 = *at, u1 = edgeU(e, s1);
+      const double s1 = *at, u1 = uAt(k, s1);
       if (!(s1 > s0)) continue;
-      const double ym = 0.5 * (s0 + s1), um = edgeU(e, ym);
+      const double ym = 0.5 * (s0 + s1), um = uAt(k, ym);
       int32_t left = winding0, here = e.winding, follows = 0;
       for (std::size_t f = 0; f < n; ++f) {  // without branches: which parts cross, and where, is data
         // edgeU(part f, ym) where the part crosses the line (v0 <= ym < v1)
