@@ -2,7 +2,8 @@
 # What the print corrections cost (docs/BENCHMARKS.md, "Cost of the corrections"):
 #   bench/corrections_cost.sh [BUILD_DIR]
 # Slices the aligner at 1 um into SL1 masks with and without every correction, alternating the two runs
-# REPEAT times (default 8), and prints each run's median (min-max) wall time and the ratio. "Every
+# REPEAT times (default 8), and prints each run's median (min-max) wall time, its CPU time (user +
+# sys, steadier than the wall time on a shared machine) and the ratios. "Every
 # correction" is the issue's set on anti-aliased masks: --absolute-correction 0.05
 # --elefant-foot-compensation 0.2 --relative-correction-x/y 1.02 --gamma-correction 0.8 and a light map
 # (a 1440 x 2560 ramp from 200 to 255 along the long side, written here). BINARY=1 adds the binary pair
@@ -21,6 +22,7 @@ out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 [ -x "$bin" ] || { echo "no $bin: build first (scripts/build.sh)"; exit 1; }
 [ -f "$model" ] || { echo "no model $model (set MODEL or TOPOSLICE_MODELS_DIR)"; exit 1; }
+command -v /usr/bin/time >/dev/null || { echo "needs /usr/bin/time (apt-get install time)"; exit 1; }
 
 # The light map: 8-bit grayscale PNG, 1440 wide and 2560 tall (the SL1's portrait images).
 python3 - "$out/light.png" <<'EOF'
@@ -46,12 +48,12 @@ fi
 
 for _ in $(seq "$repeat"); do
   for i in "${!labels[@]}"; do
-    start=$(date +%s.%N)
     # shellcheck disable=SC2086 # the run's options, split as written above (the paths have no spaces)
-    "$bin" slice "$model" -H "$height" --printer sl1 --masks "$out/m$i.sl1" --threads "$threads" -q --force \
+    /usr/bin/time -f "%e %U %S" -o "$out/time" \
+      "$bin" slice "$model" -H "$height" --printer sl1 --masks "$out/m$i.sl1" --threads "$threads" -q --force \
       ${args[$i]}
-    end=$(date +%s.%N)
-    echo "$i $(awk "BEGIN{printf \"%.3f\", $end - $start}")" >> "$out/times"
+    read -r wall user sys < "$out/time"
+    echo "$i $wall $(awk "BEGIN{printf \"%.2f\", $user + $sys}")" >> "$out/times"
   done
 done
 
@@ -60,18 +62,21 @@ echo "model $(basename "$model"), -H $height, SL1 grid, --threads $threads, $rep
 echo
 python3 - "$out/times" "${labels[@]}" <<'EOF'
 import statistics, sys
-times = {}
+times, cpus = {}, {}
 for line in open(sys.argv[1]):
-    i, t = line.split()
-    times.setdefault(int(i), []).append(float(t))
+    i, wall, cpu = line.split()
+    times.setdefault(int(i), []).append(float(wall))
+    cpus.setdefault(int(i), []).append(float(cpu))
 labels = sys.argv[2:]
-print("| run | median wall (min-max) | vs the same masks without corrections |")
-print("|---|---:|---:|")
+print("| run | median wall (min-max) | wall vs the same masks without corrections | median CPU (user + sys) | CPU vs without |")
+print("|---|---:|---:|---:|---:|")
 for i, label in enumerate(labels):
-    t = times[i]
-    base = times[i - i % 2]
+    t, c = times[i], cpus[i]
+    base, cbase = times[i - i % 2], cpus[i - i % 2]
     ratio = statistics.median(t) / statistics.median(base)
     pairs = statistics.median(a / b for a, b in zip(t, base))
     cost = "1" if i % 2 == 0 else f"{ratio:.3f}x (median of the rounds' ratios {pairs:.3f}x)"
-    print(f"| {label} | {statistics.median(t):.2f} s ({min(t):.2f}-{max(t):.2f}) | {cost} |")
+    ccost = "1" if i % 2 == 0 else f"{statistics.median(c) / statistics.median(cbase):.3f}x"
+    print(f"| {label} | {statistics.median(t):.2f} s ({min(t):.2f}-{max(t):.2f}) | {cost} | "
+          f"{statistics.median(c):.2f} s | {ccost} |")
 EOF
