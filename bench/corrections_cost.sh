@@ -46,6 +46,7 @@ if [ "${BINARY:-0}" = 1 ]; then
   args+=("" "${corrections[*]}")
 fi
 
+machine="$(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), from $(date -u '+%F %H:%M UTC'), load $(cut -d' ' -f1-3 /proc/loadavg) at the start"
 for _ in $(seq "$repeat"); do
   for i in "${!labels[@]}"; do
     # shellcheck disable=SC2086 # the run's options, split as written above (the paths have no spaces)
@@ -57,7 +58,7 @@ for _ in $(seq "$repeat"); do
   done
 done
 
-echo "machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs), $(date -u '+%F %H:%M UTC'), load $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "machine: $machine, to $(date -u '+%H:%M UTC')"
 echo "model $(basename "$model"), -H $height, SL1 grid, --threads $threads, $repeat rounds alternating"
 echo
 python3 - "$out/times" "${labels[@]}" <<'EOF'
