@@ -95,7 +95,8 @@ cInt roundToUnits(double mm) {
 }
 
 // ClipperLib::CleanPolygon (Clipper 6.4.2), re-derived on index links instead of a heap-allocated
-// node list: the same tests in the same order, so the same points. Appends the cleaned loop to `out`.
+// node list: the same tests in the same order, so the same points (a visit whose triangle clearly turns
+// skips them: clearlyTurns). Appends the cleaned loop to `out`.
 // Growing and shrinking both clean with it.
 class LoopCleaner {
  public:
@@ -115,7 +116,10 @@ class LoopCleaner {
       const IntPoint& p = in[op];
       const IntPoint& before = in[prev_[op]];
       const IntPoint& after = in[next_[op]];
-      if (close(p, before, distSqrd)) {
+      if (clearlyTurns(before, p, after, distSqrd)) {
+        done_[op] = 1;
+        op = next_[op];
+      } else if (close(p, before, distSqrd)) {
         op = exclude(op);
         --size;
       } else if (close(before, after, distSqrd)) {
@@ -141,6 +145,20 @@ class LoopCleaner {
     prev_[next_[op]] = result;
     done_[result] = 0;
     return result;
+  }
+
+  // Whether the three tests of a visit (close, close, nearlyCollinear) must all fail, known from twice the
+  // area A of the triangle b, p, a alone (most visits): each corner's distance from the line through the
+  // other two is A over that side's length, and no side is longer than L, the sum of |dx| + |dy| of
+  // b -> p and p -> a; so where A > d L no corner lies within d of a line, and no side is d or shorter
+  // (A is at most the product of two sides, each at most L). The margin of 1e-9 is far beyond the
+  // rounding on either side of the comparison. Clipper's decisions are unchanged (tests compare them).
+  static bool clearlyTurns(const IntPoint& b, const IntPoint& p, const IntPoint& a, double distSqrd) {
+    const double x1 = static_cast<double>(p.X - b.X), y1 = static_cast<double>(p.Y - b.Y);
+    const double x2 = static_cast<double>(a.X - p.X), y2 = static_cast<double>(a.Y - p.Y);
+    const double twiceArea = x1 * y2 - y1 * x2;
+    const double sides = std::fabs(x1) + std::fabs(y1) + std::fabs(x2) + std::fabs(y2);
+    return twiceArea * twiceArea > distSqrd * (sides * sides) * (1 + 1e-9);
   }
 
   static bool close(const IntPoint& a, const IntPoint& b, double distSqrd) {
