@@ -148,17 +148,18 @@ class LoopCleaner {
   }
 
   // Whether the three tests of a visit (close, close, nearlyCollinear) must all fail, known from twice the
-  // area A of the triangle b, p, a alone (most visits): each corner's distance from the line through the
-  // other two is A over that side's length, and no side is longer than L, the sum of |dx| + |dy| of
-  // b -> p and p -> a; so where A > d L no corner lies within d of a line, and no side is d or shorter
-  // (A is at most the product of two sides, each at most L). The margin of 1e-9 is far beyond the
+  // area A of the triangle b, p, a and its longest side L alone (most visits): each corner's distance
+  // from the line through the other two is A over that side's length, at least A / L; so where A > d L
+  // no corner lies within d of a line, and no side is d or shorter (A is at most the product of two
+  // sides, the other at most L). The differences are exact, and the margin of 1e-9 is far beyond the
   // rounding on either side of the comparison. Clipper's decisions are unchanged (tests compare them).
   static bool clearlyTurns(const IntPoint& b, const IntPoint& p, const IntPoint& a, double distSqrd) {
     const double x1 = static_cast<double>(p.X - b.X), y1 = static_cast<double>(p.Y - b.Y);
     const double x2 = static_cast<double>(a.X - p.X), y2 = static_cast<double>(a.Y - p.Y);
     const double twiceArea = x1 * y2 - y1 * x2;
-    const double sides = std::fabs(x1) + std::fabs(y1) + std::fabs(x2) + std::fabs(y2);
-    return twiceArea * twiceArea > distSqrd * (sides * sides) * (1 + 1e-9);
+    const double x3 = x1 + x2, y3 = y1 + y2;
+    const double longest = std::max({x1 * x1 + y1 * y1, x2 * x2 + y2 * y2, x3 * x3 + y3 * y3});
+    return twiceArea * twiceArea > distSqrd * longest * (1 + 1e-9);
   }
 
   static bool close(const IntPoint& a, const IntPoint& b, double distSqrd) {
