@@ -151,15 +151,17 @@ class LoopCleaner {
   // area A of the triangle b, p, a and its longest side L alone (most visits): each corner's distance
   // from the line through the other two is A over that side's length, at least A / L; so where A > d L
   // no corner lies within d of a line, and no side is d or shorter (A is at most the product of two
-  // sides, the other at most L). The differences are exact, and the margin of 1e-9 is far beyond the
-  // rounding on either side of the comparison. Clipper's decisions are unchanged (tests compare them).
+  // sides, the other at most L). The differences here are exact; the margin (A^2 above d^2 L^2 by a
+  // factor 1 + 1e-6) covers the rounding of Clipper's own sums (a * x + b * y with coordinates up to
+  // X round by about X L 1e-16, against the margin's 2.5e-4 L for d = 500 units: safe up to kilometres).
+  // Clipper's decisions are unchanged (tests compare them).
   static bool clearlyTurns(const IntPoint& b, const IntPoint& p, const IntPoint& a, double distSqrd) {
     const double x1 = static_cast<double>(p.X - b.X), y1 = static_cast<double>(p.Y - b.Y);
     const double x2 = static_cast<double>(a.X - p.X), y2 = static_cast<double>(a.Y - p.Y);
     const double twiceArea = x1 * y2 - y1 * x2;
     const double x3 = x1 + x2, y3 = y1 + y2;
     const double longest = std::max({x1 * x1 + y1 * y1, x2 * x2 + y2 * y2, x3 * x3 + y3 * y3});
-    return twiceArea * twiceArea > distSqrd * longest * (1 + 1e-9);
+    return twiceArea * twiceArea > distSqrd * longest * (1 + 1e-6);
   }
 
   static bool close(const IntPoint& a, const IntPoint& b, double distSqrd) {
