@@ -292,6 +292,9 @@ class RawOffset {
     return std::span<const IntPoint>(points_).subspan(starts_[i], starts_[i + 1] - starts_[i]);
   }
 
+  // The unit normal of edge j (from src[j]) of the path offsetPath last took.
+  Normal normal(std::size_t j) const { return {normalX_[j], normalY_[j]}; }
+
   // Clipper's order for the lowest point: larger y, then smaller x.
   static bool lower(const IntPoint& a, const IntPoint& b) { return a.Y > b.Y || (a.Y == b.Y && a.X < b.X); }
 
@@ -322,22 +325,21 @@ class RawOffset {
   // DoOffset of one closed path into dest_, noting each point's source vertex and each concave detour.
   void offsetPath(std::span<const IntPoint> src) {
     const std::size_t n = src.size();
-    normals_.resize(n);
-    lengths_.resize(n);
     // Each edge's length and unit normal (dy, -dx) / length, as Clipper's GetUnitNormal, in loops GCC
     // vectorizes (two edges per sqrtpd and divpd: the same values; the file is built with
     // -fno-math-errno, which only drops the errno of a square root of a negative, never taken here).
     // add() dropped repeated points, so no edge has length 0 (the 1 added there keeps f finite).
-    dxs_.resize(n);
-    dys_.resize(n);
-    for (std::size_t j = 0; j < n; ++j) {
+    lengths_.resize(n);
+    normalX_.resize(n);
+    normalY_.resize(n);
+    for (std::size_t j = 0; j < n; ++j) {  // the edge vectors first, turned into normals in place
       const IntPoint& a = src[j];
       const IntPoint& b = src[j + 1 == n ? 0 : j + 1];
-      dxs_[j] = static_cast<double>(b.X - a.X);
-      dys_[j] = static_cast<double>(b.Y - a.Y);
+      normalX_[j] = static_cast<double>(b.X - a.X);
+      normalY_[j] = static_cast<double>(b.Y - a.Y);
     }
-    double* __restrict dx = dxs_.data();
-    double* __restrict dy = dys_.data();
+    double* __restrict dx = normalX_.data();
+    double* __restrict dy = normalY_.data();
     double* __restrict len = lengths_.data();
     for (std::size_t j = 0; j < n; ++j) {
       const double l = std::sqrt(dx[j] * dx[j] + dy[j] * dy[j]);
@@ -347,7 +349,6 @@ class RawOffset {
       dx[j] = nx;
       dy[j] = ny;
     }
-    for (std::size_t j = 0; j < n; ++j) normals_[j] = {dx[j], dy[j]};
     kinds_.resize(n);
     dest_.clear();
     detours_.clear();
@@ -357,7 +358,7 @@ class RawOffset {
   }
 
   void offsetPoint(std::span<const IntPoint> src, std::size_t j, std::size_t& k) {
-    const Normal nk = normals_[k], nj = normals_[j];
+    const Normal nk = normal(k), nj = normal(j);
     const IntPoint& p = src[j];
     double sinA = nk.x * nj.y - nj.x * nk.y;
     if (std::fabs(sinA * delta_) < 1.0) {
@@ -512,7 +513,7 @@ class RawOffset {
       return forward ? (k + 1 == n ? 0 : k + 1) : (k == 0 ? n - 1 : k - 1);
     };
     const std::size_t w = step(j), x = step(w);
-    const Normal nv = normals_[forward ? j : w], nx = normals_[forward ? w : x];
+    const Normal nv = normal(forward ? j : w), nx = normal(forward ? w : x);
     const double d = std::fabs(delta_), sign = delta_ < 0 ? -1.0 : 1.0;
     const double ex = static_cast<double>(src[w].X - src[j].X), ey = static_cast<double>(src[w].Y - src[j].Y);
     const double len = lengths_[forward ? j : w];
@@ -611,23 +612,23 @@ class RawOffset {
     if (n < k + 4 || i0 < 1 || i0 + 3 * k >= m) return;
     const std::size_t j0 = corners_[t] + n - 1;  // v_i = src[(j0 + i) % n]; edge i runs from v_i
     const auto vertex = [&](std::size_t i) -> const IntPoint& { return src[(j0 + i) % n]; };
-    const auto normal = [&](std::size_t i) { return normals_[(j0 + i) % n]; };
+    const auto edgeNormal = [&](std::size_t i) { return normal((j0 + i) % n); };
     // Moved edge i: from the point before the first detour (i = 0) or a_i, to b_{i+1} or the point after.
     const auto from = [&](std::size_t i) -> const IntPoint& {
       return dest_[i == 0 ? i0 - 1 : i0 + 3 * i - 1];
     };
     const auto to = [&](std::size_t i) -> const IntPoint& { return dest_[i0 + 3 * i]; };
     const double d = std::fabs(delta_), sign = delta_ < 0 ? -1.0 : 1.0;
-    const Normal n0 = normal(0), nk = normal(k);
+    const Normal n0 = edgeNormal(0), nk = edgeNormal(k);
     const auto dot = [](const Normal& a, const Normal& b) { return a.x * b.x + a.y * b.y; };
     // Less than a half turn in all: every corner turns one way by less than a half turn, so the normals
     // stay on one side of n_0 until the turn reaches a half.
     const auto cross = [](const Normal& a, const Normal& b) { return a.x * b.y - a.y * b.x; };
-    const double way = cross(n0, normal(1)) > 0 ? 1.0 : -1.0;
+    const double way = cross(n0, edgeNormal(1)) > 0 ? 1.0 : -1.0;
     for (std::size_t i = 1; i <= k; ++i)
-      if (!(way * cross(n0, normal(i)) > 0)) return;
+      if (!(way * cross(n0, edgeNormal(i)) > 0)) return;
     const auto over = [&](std::size_t j, double x, double y) {  // (x, y) over edge j's line, outwards
-      const Normal nj = normal(j);
+      const Normal nj = edgeNormal(j);
       return sign *
              ((x - static_cast<double>(vertex(j).X)) * nj.x + (y - static_cast<double>(vertex(j).Y)) * nj.y);
     };
@@ -637,9 +638,9 @@ class RawOffset {
     // Every band on the outer side of every line (the run is a convex arc, so this holds for edges less
     // than a quarter turn apart): the moved ends of the others.
     for (std::size_t i = 0; i <= k; ++i) {
-      const Normal ni = normal(i);
+      const Normal ni = edgeNormal(i);
       for (std::size_t j = 0; j <= k; ++j) {
-        if (j == i || dot(ni, normal(j)) >= 0) continue;
+        if (j == i || dot(ni, edgeNormal(j)) >= 0) continue;
         for (const std::size_t end : {i, i + 1}) {
           const double x = static_cast<double>(vertex(end).X) + delta_ * ni.x;
           const double y = static_cast<double>(vertex(end).Y) + delta_ * ni.y;
@@ -648,8 +649,8 @@ class RawOffset {
       }
     }
     for (std::size_t j = 0; j <= k; ++j) {
-      if (j > 0 && height(j, vertex(0)) < d * (1 - dot(n0, normal(j))) + 1) return;
-      if (j < k && height(j, vertex(k + 1)) < d * (1 - dot(nk, normal(j))) + 1) return;
+      if (j > 0 && height(j, vertex(0)) < d * (1 - dot(n0, edgeNormal(j))) + 1) return;
+      if (j < k && height(j, vertex(k + 1)) < d * (1 - dot(nk, edgeNormal(j))) + 1) return;
     }
     const IntPoint &v0 = vertex(0), &vk = vertex(k);
     const double l0 = lengths_[j0 % n], lk = lengths_[(j0 + k) % n];  // edges 0 and k
@@ -659,7 +660,7 @@ class RawOffset {
     const double ukx = static_cast<double>(vertex(k + 1).X - vk.X) / lk,
                  uky = static_cast<double>(vertex(k + 1).Y - vk.Y) / lk;
     for (std::size_t i = 0; i <= k; ++i) {  // the moved ends of edge i, along the first and the last edge
-      const Normal ni = normal(i);
+      const Normal ni = edgeNormal(i);
       for (const std::size_t end : {i, i + 1}) {
         const double qx = static_cast<double>(vertex(end).X) + delta_ * ni.x;
         const double qy = static_cast<double>(vertex(end).Y) + delta_ * ni.y;
@@ -728,10 +729,9 @@ class RawOffset {
   double delta_ = 0, miterBound_ = 0.5;
   std::vector<IntPoint> points_;
   std::vector<uint32_t> starts_{0};
-  std::vector<Normal> normals_;
-  std::vector<double> lengths_;    // of each edge of the path (normals_'s edges)
-  std::vector<double> dxs_, dys_;  // offsetPath's edge vectors, then normals, as arrays
-  std::vector<uint8_t> kinds_;     // each source vertex's join: kStraight, kDetour, kMitre or kSquare
+  std::vector<double> lengths_;            // of each edge of the path
+  std::vector<double> normalX_, normalY_;  // and its unit normal (offsetPath), read by normal(j)
+  std::vector<uint8_t> kinds_;             // each source vertex's join: kStraight, kDetour, kMitre or kSquare
   Path dest_, trimmed_;
   std::vector<uint32_t> detours_;  // where each concave corner's three points start in dest_
   std::vector<uint32_t> corners_;  // and the source vertex of each
