@@ -14,11 +14,13 @@
 #include "core/print/corrections.h"
 #include "core/raster/rasterize.h"
 #include "core/slicing/planes.h"
+#include "io/masks/exr_writer.h"
 #include "io/readers/stl_reader.h"
 #include "io/readers/stl_writer.h"
 #include "offset/polygon_offset.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"
+#include "tests/tinyexr_read.h"
 #include "tests/tool_runner.h"
 
 namespace toposlice {
@@ -841,6 +843,27 @@ TEST_F(CorrectionsCli, ProfileFileSettingsReachTheSl1) {
   EXPECT_NE(summary.find("\"exposure_time\": \"7\""), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"material\": \"dental\""), std::string::npos) << summary;
   EXPECT_NE(summary.find("\"resin_mass_g\""), std::string::npos) << summary;
+}
+
+// The settings a job uses also go into each EXR layer's header (docs/FORMATS.md: "ts:" + the key), read
+// back here with tinyexr, a decoder that is not the one that writes them.
+TEST_F(CorrectionsCli, SettingsReachTheExrLayersHeaders) {
+  const RunResult run = this->run({"slice", examplePart().string(), "-H", "1", "--printer", "sl1", "--masks",
+                                   path("a.exr").string(), "--exposure-time", "6.5", "--absolute-correction",
+                                   "0.02", "--set", "faded_layers=7", "-q"});
+  ASSERT_EQ(run.code(), 0) << run.describe();
+  const TinyExrLayer layer = readExrWithTinyExr(path("a.exr") / exrLayerFileName("example_part", 0, 7));
+  ASSERT_EQ(layer.error, "");
+  for (const auto& [key, value] :
+       std::vector<std::pair<std::string, std::string>>{{"ts:exposure_time", "6.5"},
+                                                        {"ts:absolute_correction", "0.02"},
+                                                        {"ts:faded_layers", "7"},
+                                                        {"ts:initial_exposure_time", "35"},
+                                                        {"ts:printer_model", "SL1"}}) {
+    const auto found = layer.strings.find(key);
+    ASSERT_NE(found, layer.strings.end()) << key;
+    EXPECT_EQ(found->second, value) << key;
+  }
 }
 
 TEST_F(CorrectionsCli, GrowingMasksAreTheSameWithOrWithoutContourOutputs) {

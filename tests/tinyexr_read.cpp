@@ -47,6 +47,8 @@ TinyExrLayer readExrWithTinyExr(const std::filesystem::path& file) {
     const EXRAttribute& a = header.custom_attributes[i];
     if (std::strcmp(a.name, "z") == 0 && a.size == 4) std::memcpy(&out.z, a.value, 4);
     if (std::strcmp(a.name, "layer") == 0 && a.size == 4) std::memcpy(&out.layer, a.value, 4);
+    if (std::strcmp(a.type, "string") == 0 && a.size >= 0)
+      out.strings[a.name] = std::string(reinterpret_cast<const char*>(a.value), static_cast<size_t>(a.size));
   }
   for (int c = 0; c < header.num_channels; ++c) header.requested_pixel_types[c] = TINYEXR_PIXELTYPE_FLOAT;
   EXRImage image;

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <string>
 
 #include "core/raster/mask_image.h"
@@ -16,7 +17,8 @@ struct TinyExrLayer {
   std::string compression;  // "zip", "zips", "rle", "none", "piz", "other"
   float z = 0;
   int layer = -1;
-  std::string error;  // empty when read
+  std::map<std::string, std::string> strings;  // the header's string attributes, by name
+  std::string error;                           // empty when read
 };
 
 TinyExrLayer readExrWithTinyExr(const std::filesystem::path& file);
