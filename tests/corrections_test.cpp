@@ -859,10 +859,44 @@ TEST_F(CorrectionsCli, SettingsReachTheExrLayersHeaders) {
                                                         {"ts:absolute_correction", "0.02"},
                                                         {"ts:faded_layers", "7"},
                                                         {"ts:initial_exposure_time", "35"},
-                                                        {"ts:printer_model", "SL1"}}) {
+                                                        {"ts:printer_model", "SL1"},
+                                                        {"ts:gamma_correction", "0"}}) {
     const auto found = layer.strings.find(key);
     ASSERT_NE(found, layer.strings.end()) << key;
     EXPECT_EQ(found->second, value) << key;
+  }
+  // Left to --antialias, the gamma the headers give is the one the masks have (as the SL1's ini says).
+  const RunResult aa = this->run({"slice", examplePart().string(), "-H", "1", "--printer", "sl1", "--masks",
+                                  path("aa.exr").string(), "--antialias", "-q"});
+  ASSERT_EQ(aa.code(), 0) << aa.describe();
+  const TinyExrLayer aaLayer = readExrWithTinyExr(path("aa.exr") / exrLayerFileName("example_part", 0, 7));
+  ASSERT_EQ(aaLayer.error, "");
+  EXPECT_EQ(aaLayer.strings.count("ts:gamma_correction") ? aaLayer.strings.at("ts:gamma_correction") : "none",
+            "1");
+}
+
+// The same settings in a VDB file's metadata, as Debian's vdb_print (OpenVDB's own tool) lists them.
+TEST_F(CorrectionsCli, SettingsReachTheVdbFilesMetadata) {
+  if (!fs::exists("/usr/bin/vdb_print"))
+    GTEST_SKIP() << "vdb_print not installed (Debian package libopenvdb-tools)";
+  for (const bool antialias : {false, true}) {
+    const fs::path vdb = path(antialias ? "aa.vdb" : "b.vdb"), listing = path("metadata.txt");
+    std::vector<std::string> args{
+        "slice", examplePart().string(), "-H", "1", "--printer", "sl1", "--masks", vdb.string()};
+    args.insert(args.end(), {"--exposure-time", "6.5", "--elefant-foot-compensation", "0.1", "--set",
+                             "material_correction_z=1.01", "-q"});
+    if (antialias) args.push_back("--antialias");
+    const RunResult run = this->run(args);
+    ASSERT_EQ(run.code(), 0) << run.describe();
+    const int rc = std::system(
+        ("/usr/bin/vdb_print -m '" + vdb.string() + "' > '" + listing.string() + "' 2>&1").c_str());
+    const std::string text = readBytes(listing);
+    ASSERT_EQ(rc, 0) << text;
+    for (const std::string& expected : std::vector<std::string>{
+             "toposlice:exposure_time: 6.5\n", "toposlice:elefant_foot_compensation: 0.1\n",
+             "toposlice:material_correction_z: 1.01\n", "toposlice:printer_model: SL1\n",
+             std::string("toposlice:gamma_correction: ") + (antialias ? "1" : "0") + "\n"})
+      EXPECT_NE(text.find(expected), std::string::npos) << expected << text;
   }
 }
 

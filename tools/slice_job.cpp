@@ -223,6 +223,8 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   job.printerProfile = print.printerName;
   job.materialName = print.materialName;
   job.settings = settingValues(print);
+  for (auto& [key, value] : job.settings)  // unset, --antialias decides: the headers say what it chose
+    if (key == "gamma_correction" && value.empty()) value = job.antiAliased ? "1" : "0";
   return job;
 }
 
