@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/edit_distance.h"
+#include "core/memory_advice.h"
 #include "core/mesh/mesh_info.h"
 #include "core/mesh/weld.h"
 #include "core/number_text.h"
@@ -655,5 +656,6 @@ int run(int argc, char** argv) {
 }  // namespace toposlice
 
 int main(int argc, char** argv) {
+  toposlice::keepFreedMemory();
   return toposlice::run(argc, argv);
 }

@@ -59,6 +59,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "core/memory_advice.h"
 #include "io/errors.h"
 #include "io/jobs/batch_job.h"
 #include "io/output_file.h"
@@ -749,5 +750,6 @@ int run(int argc, char** argv) {
 }  // namespace toposlice
 
 int main(int argc, char** argv) {
+  toposlice::keepFreedMemory();
   return toposlice::run(argc, argv);
 }

@@ -15,6 +15,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/memory_advice.h"
 #include "core/mesh/mesh_info.h"
 #include "core/mesh/variant_check.h"
 #include "core/mesh/weld.h"
@@ -74,6 +75,7 @@ void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* s
   const IndexedMesh mesh = welded && welded->facetVertices.size() == soup.corners.size()
                                ? std::move(*welded)
                                : weldCorners(soup.corners, runner);
+  reserveHugePages(table, soup.corners.size());
   table.resize(soup.corners.size());
   const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table, runner);
   if (stats) *stats = s;

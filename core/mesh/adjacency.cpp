@@ -4,6 +4,8 @@
 #include <cassert>
 #include <vector>
 
+#include "core/memory_advice.h"
+
 namespace toposlice {
 namespace {
 
@@ -87,6 +89,7 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
   std::vector<Owned> owned;
   if (filed) {
     partBegin = filePositions(std::span(chunkPartAt), facetChunks, parts);
+    reserveHugePages(owned, partBegin[parts]);
     owned.resize(partBegin[parts]);
     run.run(facetChunks, 1, [&](std::size_t c0, std::size_t c1) {
       for (std::size_t c = c0; c < c1; ++c)
@@ -120,7 +123,9 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
     }
   });
   for (std::size_t p = 0; p < parts; ++p) partEntries[p + 1] += partEntries[p];
-  std::vector<BucketEntry> bucket(partEntries[parts]);
+  std::vector<BucketEntry> bucket;
+  reserveHugePages(bucket, partEntries[parts]);
+  bucket.resize(partEntries[parts]);
   std::vector<EdgeStats> partStats(parts);
   run.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
     for (std::size_t p = p0; p < p1; ++p) {

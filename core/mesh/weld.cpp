@@ -6,6 +6,8 @@
 #include <memory>
 #include <utility>
 
+#include "core/memory_advice.h"
+
 namespace toposlice {
 namespace {
 
@@ -107,7 +109,9 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
     for (unsigned p = 0; p < parts; ++p) base[c + 1] += firsts[c * parts + p];
   }
   IndexedMesh mesh;
+  reserveHugePages(mesh.vertices, base[chunks]);
   mesh.vertices.resize(base[chunks]);
+  reserveHugePages(mesh.facetVertices, n);
   mesh.facetVertices.resize(n);
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c) {
@@ -134,10 +138,11 @@ IncrementalWeld::IncrementalWeld(std::size_t expectedCorners) {
   // full, and it doubles (the vertices re-inserted) before a piece could fill it past half.
   while (capacity < expectedCorners / 2) capacity <<= 1;
   mask_ = capacity - 1;
+  reserveHugePages(table_, capacity);
   table_.assign(capacity, kEmpty);
-  keys_.reserve(expectedCorners / 4 + 16);
-  mesh_.vertices.reserve(expectedCorners / 4 + 16);
-  mesh_.facetVertices.reserve(expectedCorners);
+  reserveHugePages(keys_, expectedCorners / 4 + 16);
+  reserveHugePages(mesh_.vertices, expectedCorners / 4 + 16);
+  reserveHugePages(mesh_.facetVertices, expectedCorners);
 }
 
 void IncrementalWeld::add(std::span<const Point3f> corners) {

@@ -2,11 +2,14 @@
 
 #include <algorithm>
 
+#include "core/memory_advice.h"
+
 namespace toposlice {
 
 void allocateMarchMesh(const FacetLayers& layers, std::size_t facetCount, MarchMesh& mesh) {
   const std::size_t records = layers.bucketFacets.size();
-  mesh.facets.resize(records);
+  mesh.facets.resize(records);  // not written yet (UninitialisedAllocator)
+  adviseHugePages(mesh.facets.data(), records * sizeof(MarchFacet));
   mesh.layerStart = layers.bucketOffsets;
   mesh.position.assign(facetCount, -1);
   mesh.last.resize(records);

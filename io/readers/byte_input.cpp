@@ -13,6 +13,7 @@
 #include <cstring>
 #include <system_error>
 
+#include "core/memory_advice.h"
 #include "io/errors.h"
 
 namespace toposlice {
@@ -34,6 +35,7 @@ std::string quoteToken(std::string_view token) {
 
 void ByteBuffer::reserveExactly(std::size_t newCapacity) {
   auto grown = std::make_unique_for_overwrite<std::byte[]>(newCapacity);
+  adviseHugePages(grown.get(), newCapacity);  // a whole file or model: written once, read by every stage
   if (size > 0) std::memcpy(grown.get(), data.get(), size);
   data = std::move(grown);
   capacity = newCapacity;

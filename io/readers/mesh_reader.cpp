@@ -7,6 +7,7 @@
 #include <optional>
 #include <string_view>
 
+#include "core/memory_advice.h"
 #include "core/mesh/weld.h"
 #include "io/errors.h"
 #include "io/readers/byte_input.h"
@@ -186,7 +187,7 @@ bool parseGzipBinaryStlAhead(GzipStream& stream, FacetSoup& soup, MeshSource& so
   if (stream.waitFor(kPrefix) >= kPrefix) {
     for (int i = 3; i >= 0; --i) count = (count << 8) | std::to_integer<uint32_t>(stream.bytes()[80 + i]);
     if (count > 0 && kPrefix + uint64_t{kRecord} * count == expected) {
-      soup.corners.reserve(std::size_t{3} * count);
+      reserveHugePages(soup.corners, std::size_t{3} * count);
       std::optional<IncrementalWeld> weld;
       if (weldInto) weld.emplace(std::size_t{3} * count);
       std::size_t done = 0;

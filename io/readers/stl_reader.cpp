@@ -11,6 +11,7 @@
 #include <string_view>
 #include <system_error>
 
+#include "core/memory_advice.h"
 #include "io/errors.h"
 #include "io/readers/byte_input.h"
 
@@ -117,12 +118,13 @@ void parseBinary(std::span<const std::byte> bytes, uint32_t facetCount, const st
   if (facetCount == 0) fail(name, "contains no facets");
   constexpr std::size_t kChunkFacets = 1 << 15;
   if (runner.width <= 1 || facetCount < 4 * kChunkFacets) {
-    soup.corners.reserve(std::size_t{facetCount} * 3);
+    reserveHugePages(soup.corners, std::size_t{facetCount} * 3);
     if (appendBinaryFacets(bytes.data() + kBinaryPrefixBytes, facetCount, soup.corners))
       failFirstNonFinite(soup.corners, name);
     return;
   }
   const std::size_t chunks = (facetCount + kChunkFacets - 1) / kChunkFacets;
+  reserveHugePages(soup.corners, std::size_t{facetCount} * 3);
   soup.corners.resize(std::size_t{facetCount} * 3);
   std::vector<uint8_t> nonFinite(chunks, 0);
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
@@ -152,7 +154,7 @@ bool streamGzipBinary(std::span<const std::byte> bytes, const std::string& name,
   }
   constexpr std::size_t kChunkFacets = 2048;  // 100 KiB
   auto chunk = std::make_unique_for_overwrite<std::byte[]>(kChunkFacets * kBinaryFacetBytes);
-  soup.corners.reserve(std::size_t{facetCount} * 3);
+  reserveHugePages(soup.corners, std::size_t{facetCount} * 3);
   bool anyNonFinite = false;
   for (std::size_t done = 0; done < facetCount;) {
     const std::size_t want = std::min<std::size_t>(kChunkFacets, facetCount - done);

@@ -1,0 +1,26 @@
+#include "core/memory_advice.h"
+
+#include <malloc.h>
+#include <sys/mman.h>
+
+#include <cstdint>
+
+namespace toposlice {
+
+void adviseHugePages(void* data, std::size_t bytes) noexcept {
+  constexpr std::uintptr_t kHuge = std::uintptr_t{2} << 20;
+  const auto begin = reinterpret_cast<std::uintptr_t>(data);
+  const std::uintptr_t first = (begin + kHuge - 1) & ~(kHuge - 1), end = (begin + bytes) & ~(kHuge - 1);
+  if (bytes < kHuge || end <= first) return;
+  // Advice only: EINVAL where the kernel has no transparent huge pages changes nothing.
+  (void)madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
+}
+
+void keepFreedMemory() noexcept {
+  // Setting either turns off glibc's own adjustment of the mmap threshold, which otherwise follows the
+  // largest block freed and keeps the 4-40 MiB arrays of one job moving between mmap and the heaps.
+  (void)mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's largest allowed on 64-bit (HEAP_MAX_SIZE / 2)
+  (void)mallopt(M_TRIM_THRESHOLD, 1 << 30);
+}
+
+}  // namespace toposlice
