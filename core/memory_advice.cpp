@@ -20,7 +20,9 @@ void keepFreedMemory() noexcept {
   // Setting either turns off glibc's own adjustment of the mmap threshold, which otherwise follows the
   // largest block freed and keeps the 4-40 MiB arrays of one job moving between mmap and the heaps.
   (void)mallopt(M_MMAP_THRESHOLD, 32 << 20);  // glibc's largest allowed on 64-bit (HEAP_MAX_SIZE / 2)
-  (void)mallopt(M_TRIM_THRESHOLD, 1 << 30);
+  // Up to 32 MiB free at the top of each heap stay with the process: enough to keep the bands' buffers
+  // (1 GiB faulted no less on the aligner), and a bound on what each thread's heap holds unused.
+  (void)mallopt(M_TRIM_THRESHOLD, 32 << 20);
 }
 
 }  // namespace toposlice

@@ -19,10 +19,10 @@ void reserveHugePages(Vector& v, std::size_t n) {
   adviseHugePages(v.data(), v.capacity() * sizeof(typename Vector::value_type));
 }
 
-// For the programs' main(): the C library keeps freed memory for the next allocation instead of handing
-// it back to the kernel and faulting it in again (bands free and allocate the same buffers layer after
-// layer, on every thread), and serves blocks up to 32 MiB from its heaps. The peak is unchanged; freed
-// memory is returned at exit.
+// For the programs' main(): the C library keeps up to 32 MiB of freed memory per heap for the next
+// allocation instead of handing it back to the kernel and faulting it in again (bands free and allocate
+// the same buffers layer after layer, on every thread), and serves blocks up to 32 MiB from its heaps.
+// The peak is unchanged.
 void keepFreedMemory() noexcept;
 
 }  // namespace toposlice
