@@ -53,6 +53,11 @@ struct FreshMapping {
   ~FreshMapping() {
     if (data != MAP_FAILED) munmap(data, bytes);
   }
+  // Its first 2 MiB boundary.
+  std::byte* aligned() const {
+    const auto base = reinterpret_cast<std::uintptr_t>(data);
+    return data + (((base + kHuge - 1) & ~(kHuge - 1)) - base);
+  }
 };
 
 // Only the whole 2 MiB pages inside the span are advised (the kernel marks their mapping "hg"): not the
@@ -61,8 +66,7 @@ TEST(MemoryAdvice, OnlyTheWhole2MiBPagesOfASpanAreAdvised) {
   if (!kernelHasHugePages()) GTEST_SKIP() << "this kernel has no transparent huge pages";
   const FreshMapping map(16 * kHuge);
   ASSERT_NE(map.data, MAP_FAILED);
-  const auto base = reinterpret_cast<std::uintptr_t>(map.data);
-  std::byte* const aligned = map.data + (((base + kHuge - 1) & ~(kHuge - 1)) - base);
+  std::byte* const aligned = map.aligned();
   std::byte* const begin = aligned + 12345;    // 2 MiB - 12345 bytes before the first whole page
   const std::size_t bytes = 9 * kHuge + 4321;  // ends 4321 + 12345 bytes into a partial page
   adviseHugePages(begin, bytes);
@@ -81,8 +85,7 @@ TEST(MemoryAdvice, SpansWithoutAWholePageAreLeftAlone) {
   if (!kernelHasHugePages()) GTEST_SKIP() << "this kernel has no transparent huge pages";
   const FreshMapping map(8 * kHuge);
   ASSERT_NE(map.data, MAP_FAILED);
-  const auto base = reinterpret_cast<std::uintptr_t>(map.data);
-  std::byte* const aligned = map.data + (((base + kHuge - 1) & ~(kHuge - 1)) - base);
+  std::byte* const aligned = map.aligned();
   adviseHugePages(aligned + 1, kHuge);              // 2 MiB, but across a page boundary
   adviseHugePages(aligned + 2 * kHuge, kHuge - 1);  // one byte short of a whole page
   adviseHugePages(nullptr, 0);
