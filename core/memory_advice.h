@@ -1,7 +1,8 @@
 #pragma once
 // How toposlice asks the kernel and the C library for memory (Linux, glibc). Measured in
-// docs/BENCHMARKS.md ("Page faults"): the aligner's contour job took 37 thousand page faults on one thread
-// and 51 thousand on two, each a kernel entry and a 4 KiB page to zero, many of them in the serial read.
+// docs/BENCHMARKS.md (thread scaling, "Session 19"): the aligner's contour job took 37 thousand page faults
+// on one thread and 51 thousand on two, each a kernel entry and a 4 KiB page to zero, many of them in the
+// serial read; with the advice below, 7 and 11-17 thousand.
 #include <cstddef>
 
 namespace toposlice {
