@@ -30,6 +30,7 @@
 #include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/tinyexr_read.h"
+#include "tests/tool_runner.h"
 
 namespace toposlice {
 namespace {
@@ -141,18 +142,6 @@ std::map<std::string, std::string> parseIni(const std::string& text) {
     if (eq != std::string::npos) m[line.substr(0, eq)] = line.substr(eq + 3);
   }
   return m;
-}
-
-std::string runTool(const std::string& command, int& rc) {
-  char name[] = "/tmp/toposlice-tool-XXXXXX";
-  const int fd = mkstemp(name);
-  if (fd >= 0) close(fd);
-  rc = std::system((command + " > " + name + " 2>&1").c_str());
-  std::ifstream in(name);
-  std::stringstream text;
-  text << in.rdbuf();
-  std::remove(name);
-  return text.str();
 }
 
 MaskJob smallJob(uint32_t width, uint32_t height, uint32_t layers, bool antiAliased) {
@@ -1022,7 +1011,8 @@ TEST_F(ExrStack, OneHalfFilePerLayerWithZAndLayer) {
   }
   if (!fs::exists("/usr/bin/exrheader")) GTEST_SKIP() << "exrheader not installed (Debian package openexr)";
   int rc = -1;
-  const std::string text = runTool("/usr/bin/exrheader '" + (out / "part.00001.exr").string() + "'", rc);
+  const std::string text =
+      tool_test::runTool("/usr/bin/exrheader '" + (out / "part.00001.exr").string() + "'", rc);
   EXPECT_EQ(rc, 0) << text;
   EXPECT_NE(text.find("z (type float): 0.0375"), std::string::npos) << text;
   EXPECT_NE(text.find("layer (type int): 1"), std::string::npos) << text;
@@ -1195,7 +1185,7 @@ TEST_F(VdbGrid, BinaryStackIsOneMaskGridWithTransformAndMetadata) {
   if (!fs::exists("/usr/bin/vdb_print"))
     GTEST_SKIP() << "vdb_print not installed (Debian package libopenvdb-tools)";
   int rc = -1;
-  const std::string text = runTool("/usr/bin/vdb_print -l '" + out.string() + "'", rc);
+  const std::string text = tool_test::runTool("/usr/bin/vdb_print -l '" + out.string() + "'", rc);
   EXPECT_EQ(rc, 0) << text;
   for (const char* expected : {"density", "first_z", "mirror_x", "origin_y", "layout: single"})
     EXPECT_NE(text.find(expected), std::string::npos) << expected << "\n" << text;

@@ -173,6 +173,20 @@ inline std::vector<std::string> splitLines(const std::string& text) {
   return lines;
 }
 
+// Runs a shell command (another program, e.g. a decoder that is not ours); its exit status in `rc`, its
+// standard output and error as the result.
+inline std::string runTool(const std::string& command, int& rc) {
+  char name[] = "/tmp/toposlice-tool-XXXXXX";
+  const int fd = mkstemp(name);
+  if (fd >= 0) close(fd);
+  rc = std::system((command + " > " + name + " 2>&1").c_str());
+  std::ifstream in(name);
+  std::stringstream text;
+  text << in.rdbuf();
+  std::remove(name);
+  return text.str();
+}
+
 inline std::string jsonString(const std::string& s) {
   std::string out = "\"";
   for (const char c : s) {
