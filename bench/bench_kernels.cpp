@@ -18,6 +18,7 @@
 #include "core/slicing/slice_follow.h"
 #include "core/slicing/slice_march.h"
 #include "io/masks/mask_png.h"
+#include "io/readers/byte_input.h"
 #include "io/readers/stl_reader.h"
 #include "offset/polygon_offset.h"
 #include "parallel/parallel.h"
@@ -66,6 +67,36 @@ void BM_ReadStlGz(benchmark::State& state) {
   for (auto _ : state) benchmark::DoNotOptimize(readStl(file).corners.data());
 }
 BENCHMARK(BM_ReadStlGz)->Unit(benchmark::kMillisecond);
+
+// The model's gzip stream inflated whole, as the readers do: arg 0 zlib (GzipReader, the fallback for
+// several members), 1 libdeflate in one call (gunzip, the one-thread read), 2 ISA-L in pieces on a
+// thread of its own (GzipStream, the threaded read, waited for to the end). A fresh output buffer
+// every time, as in a run.
+void BM_Inflate(benchmark::State& state) {
+  const ByteBuffer file = readWholeFile(modelFile());
+  const std::string name = modelFile();
+  for (auto _ : state) {
+    switch (state.range(0)) {
+      case 0:
+        benchmark::DoNotOptimize(GzipReader(file.view(), name).readAll().size);
+        break;
+      case 1: {
+        ByteBuffer out;
+        if (!inflateWhole(file.view(), gzipSizeHint(file.view()), out)) state.SkipWithError("libdeflate");
+        benchmark::DoNotOptimize(out.size);
+        break;
+      }
+      default: {
+        GzipStream stream(file.view());
+        if (!stream.finish()) state.SkipWithError("ISA-L");
+        benchmark::DoNotOptimize(stream.inflated().size());
+      }
+    }
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) *
+                          static_cast<int64_t>(gzipSizeHint(file.view())));
+}
+BENCHMARK(BM_Inflate)->DenseRange(0, 2)->UseRealTime()->Unit(benchmark::kMillisecond);
 
 void BM_Weld(benchmark::State& state) {
   const Fixture& f = fixture();
