@@ -402,9 +402,13 @@ RunDeflater::RunDeflater(DeflateScratch& scratch, uint32_t copyDistance)
 
 RunDeflater::~RunDeflater() = default;
 
+void RunDeflater::grow() {
+  tokens_.resize(std::max<size_t>(4096, 2 * size_));
+}
+
 void RunDeflater::append(uint32_t token) {
   if (size_ == tokens_.size()) [[unlikely]]
-    tokens_.resize(std::max<size_t>(4096, 2 * size_));
+    grow();
   tokens_[size_++] = static_cast<uint16_t>(token);
 }
 
@@ -454,20 +458,9 @@ void RunDeflater::putMatches(uint64_t n, uint32_t kind) {
 // Runs go out when the next value differs, so a run carries on across calls (and rows) and never ends
 // on a short remainder just because a row did.
 void RunDeflater::flush() {
+  if (pending_ == 0) return;  // most anti-aliased edge pixels: a literal after a literal
   putMatches(pending_, kRunMatch);
   pending_ = 0;
-}
-
-void RunDeflater::putBytes(uint8_t value, uint64_t count) {
-  assert(count >= 1);
-  if (last_ == value) {
-    pending_ += count;
-    return;
-  }
-  flush();
-  push(value);
-  last_ = value;
-  pending_ = count - 1;
 }
 
 void RunDeflater::putCopy(uint64_t count, uint8_t lastByte) {

@@ -11,6 +11,7 @@
 #pragma once
 
 #include <array>
+#include <cassert>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -37,8 +38,23 @@ class RunDeflater {
   RunDeflater(DeflateScratch& scratch, uint32_t copyDistance);
   ~RunDeflater();
 
-  // Appends `count` >= 1 bytes of `value`. Runs of one value across calls join into one run.
-  void putBytes(uint8_t value, uint64_t count);
+  // Appends `count` >= 1 bytes of `value`. Runs of one value across calls join into one run. Inline: an
+  // anti-aliased mask puts most of its edge pixels one literal at a time.
+  void putBytes(uint8_t value, uint64_t count) {
+    assert(count >= 1 && !plan_);
+    if (last_ == value) {
+      pending_ += count;
+      return;
+    }
+    if (pending_ != 0) flush();
+    if (size_ == tokens_.size()) [[unlikely]]
+      grow();
+    tokens_[size_++] = value;
+    ++counts_[value];
+    ++expanded_;
+    last_ = value;
+    pending_ = count - 1;
+  }
   // Appends `count` >= 3 bytes repeating those copyDistance back (the stream already holds that many);
   // the last of them is `lastByte`.
   void putCopy(uint64_t count, uint8_t lastByte);
@@ -58,6 +74,7 @@ class RunDeflater {
 
  private:
   struct Plan;
+  void grow();                  // the token buffer, doubled
   void append(uint32_t token);  // into the buffer, grown as needed; counts are the caller's
   void push(uint32_t token);
   void flush();
