@@ -158,71 +158,118 @@ bool inflateWhole(std::span<const std::byte> in, std::size_t sizeHint, ByteBuffe
   return true;
 }
 
-GzipStream::GzipStream(std::span<const std::byte> in) : in_(in), capacity_(gzipSizeHint(in)) {
-  // ISA-L counts input in 32 bits; a size of 0 (an empty or forged trailer) is not the common case.
-  if (capacity_ == 0 || in.size() > UINT32_MAX) {
+GzipChunks::GzipChunks(std::span<const std::byte> in, std::size_t headBytes, std::size_t chunkBytes,
+                       std::size_t slots)
+    : in_(in), capacity_(gzipSizeHint(in)), headBytes_(headBytes), chunkBytes_(chunkBytes), slots_(slots) {
+  // ISA-L counts input and output in 32 bits; a size of 0 (an empty or forged trailer) is not the common
+  // case.
+  if (capacity_ == 0 || in.size() > UINT32_MAX || headBytes_ > UINT32_MAX || chunkBytes_ == 0 ||
+      chunkBytes_ > UINT32_MAX || slots_ == 0) {
     publish(kEnded);
     return;
   }
-  buffer_.reserveExactly(capacity_);
+  head_ = std::make_unique_for_overwrite<std::byte[]>(std::max<std::size_t>(headBytes_, 1));
+  ring_ = std::make_unique_for_overwrite<std::byte[]>(slots_ * chunkBytes_);
   thread_ = std::thread([this] { inflateAll(); });
 }
 
-GzipStream::~GzipStream() {
-  stop_.store(true, std::memory_order_relaxed);
-  if (thread_.joinable()) thread_.join();
+GzipChunks::~GzipChunks() {
+  finish();
 }
 
-void GzipStream::publish(uint64_t state) {
+void GzipChunks::publish(uint64_t state) {
   state_.store(state, std::memory_order_release);
   state_.notify_all();
 }
 
-void GzipStream::inflateAll() {
-  constexpr uint32_t kPiece = 256 << 10;  // bytes a reader can parse while the next piece inflates
+std::span<const std::byte> GzipChunks::chunk(uint64_t c) const {
+  if (c == 0) return {head_.get(), std::min(headBytes_, capacity_)};
+  const std::size_t begin = headBytes_ + (c - 1) * chunkBytes_;
+  return {ring_.get() + ((c - 1) % slots_) * chunkBytes_, std::min(chunkBytes_, capacity_ - begin)};
+}
+
+void GzipChunks::inflateAll() {
   inflate_state s;
   isal_inflate_init(&s);
   s.crc_flag = ISAL_GZIP;  // header parsed, CRC-32 checked against the trailer
   s.next_in = const_cast<uint8_t*>(reinterpret_cast<const uint8_t*>(in_.data()));
   s.avail_in = static_cast<uint32_t>(in_.size());
-  auto* const out = reinterpret_cast<uint8_t*>(buffer_.data.get());
-  std::size_t produced = 0;
-  uint8_t beyond = 0;  // room for one byte past the expected size: writing it means the size was wrong
-  while (!stop_.load(std::memory_order_relaxed)) {
-    const bool full = produced == capacity_;
-    s.next_out = full ? &beyond : out + produced;
-    s.avail_out = full ? 1 : static_cast<uint32_t>(std::min<std::size_t>(kPiece, capacity_ - produced));
-    const uint32_t room = s.avail_out;
-    const int rc = isal_inflate(&s);
-    if (full && s.avail_out == 0) break;  // longer than the trailer says
-    if (!full) produced += room - s.avail_out;
-    if (rc != ISAL_DECOMP_OK) break;
-    if (s.block_state == ISAL_BLOCK_FINISH) {
-      // Handled: one member, nothing after it, exactly the trailer's size.
-      buffer_.size = produced;
-      publish(produced | kEnded | (s.avail_in == 0 && produced == capacity_ ? kHandled : 0));
-      return;
+  uint64_t c = 0;  // the chunk being inflated
+  for (std::size_t begin = 0; c == 0 || begin < capacity_; begin += c == 1 ? headBytes_ : chunkBytes_) {
+    // A chunk after the head takes the slot of the one `slots_` before it, once the reader is done with it.
+    for (uint64_t taken = taken_.load(std::memory_order_acquire); taken != kStop && c > slots_ + taken;
+         taken = taken_.load(std::memory_order_acquire))
+      taken_.wait(taken, std::memory_order_acquire);
+    if (taken_.load(std::memory_order_acquire) == kStop) break;
+    const std::span<const std::byte> target = chunk(c);
+    auto* const out = const_cast<uint8_t*>(reinterpret_cast<const uint8_t*>(target.data()));
+    std::size_t filled = 0;
+    while (filled < target.size()) {
+      s.next_out = out + filled;
+      s.avail_out = static_cast<uint32_t>(target.size() - filled);
+      const uint32_t room = s.avail_out, input = s.avail_in;
+      const int rc = isal_inflate(&s);
+      filled += room - s.avail_out;
+      // Damage, an end before the trailer's size, or no progress (input cut short): not handled.
+      if (rc != ISAL_DECOMP_OK || (filled < target.size() && s.block_state == ISAL_BLOCK_FINISH) ||
+          (s.avail_out == room && s.avail_in == input)) {
+        publish(c | kEnded);
+        return;
+      }
     }
-    if (s.avail_in == 0 && s.avail_out != 0) break;  // truncated
-    publish(produced);
+    publish(++c);
   }
-  buffer_.size = produced;
-  publish(produced | kEnded);
+  if (taken_.load(std::memory_order_acquire) == kStop) {
+    publish(c | kEnded);
+    return;
+  }
+  // Every byte the trailer promises is out: the stream must end here, with nothing after it.
+  uint8_t beyond = 0;
+  s.next_out = &beyond;
+  s.avail_out = 1;
+  const int rc = isal_inflate(&s);
+  const bool handled =
+      rc == ISAL_DECOMP_OK && s.avail_out == 1 && s.block_state == ISAL_BLOCK_FINISH && s.avail_in == 0;
+  publish(c | kEnded | (handled ? kHandled : 0));
 }
 
-std::size_t GzipStream::waitFor(std::size_t want) {
+std::span<const std::byte> GzipChunks::head() {
   uint64_t state = state_.load(std::memory_order_acquire);
-  while ((state & ~(kEnded | kHandled)) < want && (state & kEnded) == 0) {
+  while ((state & ~(kEnded | kHandled)) < 1 && (state & kEnded) == 0) {
     state_.wait(state, std::memory_order_acquire);
     state = state_.load(std::memory_order_acquire);
   }
-  return static_cast<std::size_t>(state & ~(kEnded | kHandled));
+  return (state & ~(kEnded | kHandled)) >= 1 ? chunk(0) : std::span<const std::byte>{};
 }
 
-bool GzipStream::finish() {
-  waitFor(SIZE_MAX);
-  if (thread_.joinable()) thread_.join();
-  return (state_.load(std::memory_order_acquire) & kHandled) != 0;
+std::span<const std::byte> GzipChunks::next() {
+  if (exhausted_) return {};
+  if (current_ > 0) {  // done with the chunk held: its slot may be refilled
+    taken_.store(current_, std::memory_order_release);
+    taken_.notify_all();
+  }
+  uint64_t state = state_.load(std::memory_order_acquire);
+  while ((state & ~(kEnded | kHandled)) <= current_ + 1 && (state & kEnded) == 0) {
+    state_.wait(state, std::memory_order_acquire);
+    state = state_.load(std::memory_order_acquire);
+  }
+  if ((state & ~(kEnded | kHandled)) <= current_ + 1) {
+    exhausted_ = true;
+    return {};
+  }
+  return chunk(++current_);
+}
+
+bool GzipChunks::finish() {
+  if (thread_.joinable()) {
+    if (!exhausted_) {  // abandoned: stop the inflater, wherever it waits
+      taken_.store(kStop, std::memory_order_release);
+      taken_.notify_all();
+    }
+    thread_.join();
+  }
+  const uint64_t state = state_.load(std::memory_order_acquire);
+  return exhausted_ && (state & kHandled) != 0;
 }
 
 ByteBuffer gunzip(std::span<const std::byte> in, const std::string& name) {

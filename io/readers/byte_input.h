@@ -74,40 +74,49 @@ class GzipReader {
 // over 4 GiB, any damage -- and the caller then reads it with GzipReader, which names the problem.
 bool inflateWhole(std::span<const std::byte> in, std::size_t sizeHint, ByteBuffer& out);
 
-// A gzip stream inflated on a thread of its own into one buffer sized from the trailer, so that a reader
-// parses what has arrived while the rest inflates (issue "Scale with cores": decompression overlapped
-// with parsing). ISA-L's igzip inflates in pieces about as fast as libdeflate's one call. It handles the
-// common case only: one member whose trailer gives the exact size. Anything else -- several members,
-// another size, any damage -- ends it as not handled, and the reader goes the general way (gunzip, whose
-// messages name the damage).
-class GzipStream {
+// A gzip stream inflated on a thread of its own, a chunk at a time, into a small ring that a reader takes
+// the chunks from in order, so that it parses what has arrived while the rest inflates (issue "Scale
+// with cores": decompression overlapped with parsing). The inflated bytes never exist whole: a model's
+// tens of megabytes are neither faulted in (every fresh page is a kernel entry and a page to zero, on
+// the inflating thread that bounds the read) nor read back from memory, and the chunks in flight stay
+// in cache. ISA-L's igzip inflates. It handles the common case only: one member whose trailer gives the
+// exact size. Anything else -- several members, another size, any damage -- ends it as not handled, and
+// the reader goes the general way (gunzip, whose messages name the damage).
+class GzipChunks {
  public:
-  explicit GzipStream(std::span<const std::byte> in);  // starts inflating
-  ~GzipStream();                                       // stops inflating, and waits for its thread
-  GzipStream(const GzipStream&) = delete;
-  GzipStream& operator=(const GzipStream&) = delete;
+  // The stream's first headBytes bytes come as its head(), the rest as chunks of chunkBytes (the last
+  // one shorter) from next(); at most `slots` chunks are inflated ahead of the reader. Starts inflating.
+  GzipChunks(std::span<const std::byte> in, std::size_t headBytes, std::size_t chunkBytes,
+             std::size_t slots = 8);
+  ~GzipChunks();  // stops inflating, and waits for its thread
+  GzipChunks(const GzipChunks&) = delete;
+  GzipChunks& operator=(const GzipChunks&) = delete;
 
-  // The size the trailer gives: the buffer's size once finish() says the stream was handled.
-  std::size_t expectedSize() const { return capacity_; }
-  // Blocks until `want` bytes are inflated or the stream has ended; returns how many are. Bytes below
-  // that count stay as they are and may be read at once.
-  std::size_t waitFor(std::size_t want);
-  // Blocks until the end. True when the stream inflated cleanly to exactly expectedSize() bytes.
+  std::size_t expectedSize() const { return capacity_; }  // the trailer's size
+  // Blocks until the head is inflated; empty when the stream ended before it was whole.
+  std::span<const std::byte> head();
+  // Blocks until the next chunk is inflated; empty when the stream ended (cleanly or not) before it.
+  // The chunk returned before is given back to the inflater: its bytes may change from here on.
+  std::span<const std::byte> next();
+  // Takes no more chunks (the rest of an unfinished stream is abandoned) and waits for the inflater.
+  // True when every chunk was taken and the stream inflated cleanly to exactly expectedSize() bytes:
+  // one member, its CRC-32 and size as the trailer says, nothing after it.
   bool finish();
-  const std::byte* bytes() const { return buffer_.data.get(); }  // below waitFor's count only
-  std::span<const std::byte> inflated() const { return {buffer_.data.get(), buffer_.size}; }  // after finish
-  ByteBuffer take() { return std::move(buffer_); }
 
  private:
   static constexpr uint64_t kEnded = uint64_t{1} << 63, kHandled = uint64_t{1} << 62;
+  static constexpr uint64_t kStop = uint64_t{1} << 62;  // in taken_: the reader takes no more
   void inflateAll();
   void publish(uint64_t state);
+  std::span<const std::byte> chunk(uint64_t c) const;  // chunk c (0: the head) in its slot
 
   std::span<const std::byte> in_;
-  std::size_t capacity_ = 0;
-  ByteBuffer buffer_;
-  std::atomic<uint64_t> state_{0};  // bytes inflated, with kEnded (and kHandled) at the end
-  std::atomic<bool> stop_{false};
+  std::size_t capacity_ = 0, headBytes_, chunkBytes_, slots_;
+  std::unique_ptr<std::byte[]> head_, ring_;
+  std::atomic<uint64_t> state_{0};  // chunks inflated (the head counts), with kEnded (and kHandled)
+  std::atomic<uint64_t> taken_{0};  // chunks after the head the reader is done with, or kStop
+  uint64_t current_ = 0;            // the chunk the reader holds (0: none yet, or the head)
+  bool exhausted_ = false;          // next() returned the end
   std::thread thread_;
 };
 

@@ -172,53 +172,46 @@ FacetSoup parseInflated(std::span<const std::byte> bytes, const std::string& nam
   return soup;
 }
 
-// A gzip'd binary STL parsed while it inflates (GzipStream, on its own thread): the records are converted
-// as their bytes arrive. Only when the trailer's size is that of a binary STL with the count the header
-// gives; the soup is kept only when the stream inflated cleanly to exactly that size and detection and
-// the STL reader would take it as that binary STL with every coordinate finite. Otherwise `whole` gets
-// the inflated bytes when the stream itself was sound, and the caller reads them (or the original
-// stream) the general way, which gives its result or error message.
-bool parseGzipBinaryStlAhead(GzipStream& stream, FacetSoup& soup, MeshSource& source, ByteBuffer& whole,
+// A gzip'd binary STL parsed while it inflates (GzipChunks, on its own thread): the records are converted
+// a chunk at a time as they arrive. Only when the trailer's size is that of a binary STL with the count
+// the header gives (and the header does not make it a PLY or 3MF file to detection); the soup is kept
+// only when the stream inflated cleanly to exactly that size with every coordinate finite. Otherwise the
+// caller reads the stream again the general way, which gives its result or error message.
+bool parseGzipBinaryStlAhead(std::span<const std::byte> bytes, FacetSoup& soup, MeshSource& source,
                              IndexedMesh* weldInto) {
   constexpr std::size_t kPrefix = 84, kRecord = 50, kBatch = 4096;  // facets converted at a time
+  GzipChunks stream(bytes, kPrefix, kRecord * kBatch);
   const std::size_t expected = stream.expectedSize();
-  bool parsed = false, nonFinite = false;
+  const std::span<const std::byte> header = stream.head();
+  if (header.size() < kPrefix) return false;
+  // Detection (`detect`) of the whole stream, from its header: a binary STL of this size unless it reads
+  // as the start of a PLY header or a ZIP archive, which the general way then decides.
+  const std::string_view text(reinterpret_cast<const char*>(header.data()), header.size());
+  if (text.starts_with("ply") || text.starts_with(std::string_view("PK\x03\x04", 4))) return false;
   uint32_t count = 0;
-  if (stream.waitFor(kPrefix) >= kPrefix) {
-    for (int i = 3; i >= 0; --i) count = (count << 8) | std::to_integer<uint32_t>(stream.bytes()[80 + i]);
-    if (count > 0 && kPrefix + uint64_t{kRecord} * count == expected) {
-      reserveHugePages(soup.corners, std::size_t{3} * count);
-      std::optional<IncrementalWeld> weld;
-      if (weldInto) weld.emplace(std::size_t{3} * count);
-      std::size_t done = 0;
-      while (done < count) {
-        const std::size_t ready =
-            (stream.waitFor(kPrefix + kRecord * std::min<std::size_t>(count, done + kBatch)) - kPrefix) /
-            kRecord;
-        if (ready <= done) break;  // the stream ended early
-        nonFinite |=
-            appendBinaryStlRecords(stream.bytes() + kPrefix + kRecord * done, ready - done, soup.corners);
-        if (weld) weld->add(std::span<const Point3f>(soup.corners).subspan(3 * done));
-        done = ready;
-      }
-      parsed = done == count;
-      if (parsed && weld) *weldInto = weld->take();
-    }
+  for (int i = 3; i >= 0; --i) count = (count << 8) | std::to_integer<uint32_t>(header[80 + i]);
+  if (count == 0 || kPrefix + uint64_t{kRecord} * count != expected) return false;
+  const std::string name = binaryStlHeaderName(header.data());
+  reserveHugePages(soup.corners, std::size_t{3} * count);
+  std::optional<IncrementalWeld> weld;
+  if (weldInto) weld.emplace(std::size_t{3} * count);
+  std::size_t done = 0;
+  bool nonFinite = false;
+  for (std::span<const std::byte> chunk = stream.next(); !chunk.empty(); chunk = stream.next()) {
+    const std::size_t records = chunk.size() / kRecord;  // whole chunks of records: the size is checked
+    nonFinite |= appendBinaryStlRecords(chunk.data(), records, soup.corners);
+    if (weld) weld->add(std::span<const Point3f>(soup.corners).subspan(3 * done));
+    done += records;
   }
-  if (!stream.finish()) {
-    if (weldInto) *weldInto = IndexedMesh{};
+  if (!stream.finish() || done != count || nonFinite) {
+    soup = FacetSoup{};
     return false;
   }
-  if (parsed && !nonFinite && detect(stream.inflated()) == Detected::kStl) {
-    source.format = MeshFormat::Stl;
-    source.binary = true;
-    source.name = binaryStlHeaderName(stream.bytes());
-    return true;
-  }
-  soup = FacetSoup{};
-  if (weldInto) *weldInto = IndexedMesh{};
-  whole = stream.take();
-  return false;
+  if (weld) *weldInto = weld->take();
+  source.format = MeshFormat::Stl;
+  source.binary = true;
+  source.name = name;
+  return true;
 }
 
 }  // namespace
@@ -233,15 +226,12 @@ FacetSoup parseMesh(std::span<const std::byte> bytes, const std::string& name, c
   if (isGzip(bytes)) {
     out.gzip = true;
     if (options.runner.width > 1) {  // a thread to inflate on, beside the parse
-      GzipStream stream(bytes);
       FacetSoup soup;
-      ByteBuffer whole;
       const double factor = options.unitMm.value_or(1.0) * options.scale;
-      if (parseGzipBinaryStlAhead(stream, soup, out, whole, factor == 1.0 ? options.weld : nullptr)) {
+      if (parseGzipBinaryStlAhead(bytes, soup, out, factor == 1.0 ? options.weld : nullptr)) {
         scaleSoup(soup, factor, name);
         return soup;
       }
-      if (whole.data) return parseInflated(whole.view(), name, options, out);
     }
     const ByteBuffer inflated = gunzip(bytes, name);
     return parseInflated(inflated.view(), name, options, out);
