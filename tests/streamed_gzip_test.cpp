@@ -203,6 +203,13 @@ TEST(StreamedGzip, DamagedOrUnusualStreamsReadAsSerially) {
   Bytes badCrc = gz;
   badCrc[gz.size() - 6] ^= std::byte{1};
   expectSameRead(badCrc, "bad CRC");
+  // Header fields the serial inflaters refuse (a reserved flag bit, another method) and ISA-L alone would
+  // read past.
+  Bytes reserved = gz, method = gz;
+  reserved[3] |= std::byte{0x80};
+  method[2] = std::byte{7};
+  expectSameRead(reserved, "a reserved header flag");
+  expectSameRead(method, "another method");
   // Something after the member: garbage, or a second member.
   Bytes trailing = gz;
   trailing.push_back(std::byte{'x'});

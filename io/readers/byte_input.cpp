@@ -162,9 +162,13 @@ GzipChunks::GzipChunks(std::span<const std::byte> in, std::size_t headBytes, std
                        std::size_t slots)
     : in_(in), capacity_(gzipSizeHint(in)), headBytes_(headBytes), chunkBytes_(chunkBytes), slots_(slots) {
   // ISA-L counts input and output in 32 bits; a size of 0 (an empty or forged trailer) is not the common
-  // case.
-  if (capacity_ == 0 || in.size() > UINT32_MAX || headBytes_ > UINT32_MAX || chunkBytes_ == 0 ||
-      chunkBytes_ > UINT32_MAX || slots_ == 0) {
+  // case. Nor is a header with another method or a reserved flag bit set: libdeflate and zlib refuse
+  // those where ISA-L reads on, and the result must not depend on which of them read the stream.
+  constexpr uint8_t kDeflate = 8, kReservedFlags = 0xE0;
+  const bool plainHeader = in.size() >= 10 && isGzip(in) && std::to_integer<uint8_t>(in[2]) == kDeflate &&
+                           (std::to_integer<uint8_t>(in[3]) & kReservedFlags) == 0;
+  if (!plainHeader || capacity_ == 0 || in.size() > UINT32_MAX || headBytes_ > UINT32_MAX ||
+      chunkBytes_ == 0 || chunkBytes_ > UINT32_MAX || slots_ == 0) {
     publish(kEnded);
     return;
   }
