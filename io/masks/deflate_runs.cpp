@@ -406,19 +406,6 @@ void RunDeflater::grow() {
   tokens_.resize(std::max<size_t>(4096, 2 * size_));
 }
 
-void RunDeflater::append(uint32_t token) {
-  if (size_ == tokens_.size()) [[unlikely]]
-    grow();
-  tokens_[size_++] = static_cast<uint16_t>(token);
-}
-
-void RunDeflater::push(uint32_t token) {
-  assert(token < kTokenKinds && !plan_);
-  append(token);
-  ++counts_[token];
-  ++expanded_;
-}
-
 // q matches of 258 bytes of `kind` (kRunMatch, kRowMatch), as repeat tokens.
 void RunDeflater::pushLongest(uint64_t q, uint32_t kind) {
   const uint32_t longest = kind + kMaxMatch - 3;

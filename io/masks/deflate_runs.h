@@ -41,17 +41,13 @@ class RunDeflater {
   // Appends `count` >= 1 bytes of `value`. Runs of one value across calls join into one run. Inline: an
   // anti-aliased mask puts most of its edge pixels one literal at a time.
   void putBytes(uint8_t value, uint64_t count) {
-    assert(count >= 1 && !plan_);
+    assert(count >= 1);
     if (last_ == value) {
       pending_ += count;
       return;
     }
     if (pending_ != 0) flush();
-    if (size_ == tokens_.size()) [[unlikely]]
-      grow();
-    tokens_[size_++] = value;
-    ++counts_[value];
-    ++expanded_;
+    push(value);
     last_ = value;
     pending_ = count - 1;
   }
@@ -74,9 +70,20 @@ class RunDeflater {
 
  private:
   struct Plan;
-  void grow();                  // the token buffer, doubled
-  void append(uint32_t token);  // into the buffer, grown as needed; counts are the caller's
-  void push(uint32_t token);
+  void grow();  // the token buffer, doubled
+  // Into the buffer, grown as needed; counts are the caller's.
+  void append(uint32_t token) {
+    if (size_ == tokens_.size()) [[unlikely]]
+      grow();
+    tokens_[size_++] = static_cast<uint16_t>(token);
+  }
+  // A literal or one match, counted.
+  void push(uint32_t token) {
+    assert(token < kTokenKinds && !plan_);
+    append(token);
+    ++counts_[token];
+    ++expanded_;
+  }
   void flush();
   void putMatches(uint64_t n, uint32_t kind);
   void pushLongest(uint64_t q, uint32_t kind);
