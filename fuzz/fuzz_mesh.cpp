@@ -35,36 +35,41 @@ void require(bool condition, const char* what) {
   std::abort();
 }
 
-// One read of the bytes: the soup's bytes and source, or the error message.
-std::string outcome(std::span<const std::byte> bytes, const toposlice::MeshReadOptions& options,
-                    toposlice::FacetSoup* soupOut = nullptr) {
+// One read of the bytes: true with the soup and source, or false; `what` gets the soup's bytes and
+// source, or the error message, to compare reads by.
+bool readOnce(std::span<const std::byte> bytes, const toposlice::MeshReadOptions& options,
+              toposlice::FacetSoup& soup, toposlice::MeshSource& source, std::string& what) {
   try {
-    toposlice::MeshSource source;
-    toposlice::FacetSoup soup = toposlice::parseMesh(bytes, "fuzz.mesh", options, &source);
-    std::string text(reinterpret_cast<const char*>(soup.corners.data()), soup.corners.size() * 12);
-    text += std::string("|") + toposlice::meshFormatName(source.format) + (source.binary ? " b " : " t ") +
-            (source.gzip ? "gz " : "") + source.name;
-    if (soupOut) *soupOut = std::move(soup);
-    return text;
+    soup = toposlice::parseMesh(bytes, "fuzz.mesh", options, &source);
   } catch (const toposlice::InputError& e) {
-    return std::string("error: ") + e.what();
+    // Bad input, reported as the readers' contracts say.
+    what = std::string("error: ") + e.what();
+    return false;
   }
+  what.assign(reinterpret_cast<const char*>(soup.corners.data()), soup.corners.size() * 12);
+  what += std::string("|") + toposlice::meshFormatName(source.format) + (source.binary ? " b " : " t ") +
+          (source.gzip ? "gz " : "") + source.name;
+  return true;
 }
 
 // The streamed gzip read (a runner of width 2, whose chunks run one after another here) against the
-// serial read, and its weld against the serial weld of the soup.
-void requireStreamedAsSerial(std::span<const std::byte> bytes) {
+// serial read's outcome, and its weld against the serial weld of the soup.
+void requireStreamedAsSerial(std::span<const std::byte> bytes, const std::string& serial) {
   toposlice::MeshReadOptions streamed;
   streamed.runner = toposlice::serialChunkRunner();
   streamed.runner.width = 2;
   toposlice::IndexedMesh weld;
   streamed.weld = &weld;
   toposlice::FacetSoup soup;
-  require(outcome(bytes, streamed, &soup) == outcome(bytes, {}), "the streamed gzip read is the serial one");
+  toposlice::MeshSource source;
+  std::string what;
+  readOnce(bytes, streamed, soup, source, what);
+  require(what == serial, "the streamed gzip read is the serial one");
   if (weld.facetVertices.empty()) return;
-  const toposlice::IndexedMesh serial = toposlice::weldCorners(soup.corners);
-  require(weld.facetVertices == serial.facetVertices && weld.vertices.size() == serial.vertices.size(),
-          "the streamed read's weld is the serial weld");
+  const toposlice::IndexedMesh serialWeld = toposlice::weldCorners(soup.corners);
+  require(
+      weld.facetVertices == serialWeld.facetVertices && weld.vertices.size() == serialWeld.vertices.size(),
+      "the streamed read's weld is the serial weld");
 }
 
 }  // namespace
@@ -72,9 +77,10 @@ void requireStreamedAsSerial(std::span<const std::byte> bytes) {
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
   const std::span<const std::byte> bytes(reinterpret_cast<const std::byte*>(data), size);
   const std::string_view text(reinterpret_cast<const char*>(data), size);
+  toposlice::FacetSoup soup;
   toposlice::MeshSource source;
-  try {
-    const toposlice::FacetSoup soup = toposlice::parseMesh(bytes, "fuzz.mesh", {}, &source);
+  std::string serial;
+  if (readOnce(bytes, {}, soup, source, serial)) {
     require(!soup.corners.empty(), "a loaded mesh has at least one facet");
     require(soup.corners.size() % 3 == 0, "corners.size() is a multiple of 3");
     for (const toposlice::Point3f& p : soup.corners) {
@@ -89,9 +95,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, std::size_t size) {
                   text.starts_with(std::string_view("PK\3\4", 4)),
               "3MF exactly when the bytes start with a zip local header");
     }
-  } catch (const toposlice::InputError&) {
-    // Bad input, reported as the readers' contracts say.
   }
-  if (text.starts_with("\x1f\x8b")) requireStreamedAsSerial(bytes);
+  if (text.starts_with("\x1f\x8b")) requireStreamedAsSerial(bytes, serial);
   return 0;
 }
