@@ -186,10 +186,13 @@ void GzipChunks::publish(uint64_t state) {
   state_.notify_all();
 }
 
+std::size_t GzipChunks::chunkBegin(uint64_t c) const {
+  return c == 0 ? 0 : headBytes_ + (c - 1) * chunkBytes_;
+}
+
 std::span<const std::byte> GzipChunks::chunk(uint64_t c) const {
   if (c == 0) return {head_.get(), std::min(headBytes_, capacity_)};
-  const std::size_t begin = headBytes_ + (c - 1) * chunkBytes_;
-  return {ring_.get() + ((c - 1) % slots_) * chunkBytes_, std::min(chunkBytes_, capacity_ - begin)};
+  return {ring_.get() + ((c - 1) % slots_) * chunkBytes_, std::min(chunkBytes_, capacity_ - chunkBegin(c))};
 }
 
 void GzipChunks::inflateAll() {
@@ -199,7 +202,7 @@ void GzipChunks::inflateAll() {
   s.next_in = const_cast<uint8_t*>(reinterpret_cast<const uint8_t*>(in_.data()));
   s.avail_in = static_cast<uint32_t>(in_.size());
   uint64_t c = 0;  // the chunk being inflated
-  for (std::size_t begin = 0; c == 0 || begin < capacity_; begin += c == 1 ? headBytes_ : chunkBytes_) {
+  for (; c == 0 || chunkBegin(c) < capacity_; ++c) {
     // A chunk after the head takes the slot of the one `slots_` before it, once the reader is done with it.
     for (uint64_t taken = taken_.load(std::memory_order_acquire); taken != kStop && c > slots_ + taken;
          taken = taken_.load(std::memory_order_acquire))
@@ -221,7 +224,7 @@ void GzipChunks::inflateAll() {
         return;
       }
     }
-    publish(++c);
+    publish(c + 1);
   }
   if (taken_.load(std::memory_order_acquire) == kStop) {
     publish(c | kEnded);
@@ -237,13 +240,17 @@ void GzipChunks::inflateAll() {
   publish(c | kEnded | (handled ? kHandled : 0));
 }
 
-std::span<const std::byte> GzipChunks::head() {
+uint64_t GzipChunks::waitForChunks(uint64_t chunks) {
   uint64_t state = state_.load(std::memory_order_acquire);
-  while ((state & ~(kEnded | kHandled)) < 1 && (state & kEnded) == 0) {
+  while ((state & ~(kEnded | kHandled)) < chunks && (state & kEnded) == 0) {
     state_.wait(state, std::memory_order_acquire);
     state = state_.load(std::memory_order_acquire);
   }
-  return (state & ~(kEnded | kHandled)) >= 1 ? chunk(0) : std::span<const std::byte>{};
+  return state & ~(kEnded | kHandled);
+}
+
+std::span<const std::byte> GzipChunks::head() {
+  return waitForChunks(1) >= 1 ? chunk(0) : std::span<const std::byte>{};
 }
 
 std::span<const std::byte> GzipChunks::next() {
@@ -252,12 +259,7 @@ std::span<const std::byte> GzipChunks::next() {
     taken_.store(current_, std::memory_order_release);
     taken_.notify_all();
   }
-  uint64_t state = state_.load(std::memory_order_acquire);
-  while ((state & ~(kEnded | kHandled)) <= current_ + 1 && (state & kEnded) == 0) {
-    state_.wait(state, std::memory_order_acquire);
-    state = state_.load(std::memory_order_acquire);
-  }
-  if ((state & ~(kEnded | kHandled)) <= current_ + 1) {
+  if (waitForChunks(current_ + 2) < current_ + 2) {
     exhausted_ = true;
     return {};
   }

@@ -108,7 +108,9 @@ class GzipChunks {
   static constexpr uint64_t kStop = uint64_t{1} << 62;  // in taken_: the reader takes no more
   void inflateAll();
   void publish(uint64_t state);
+  std::size_t chunkBegin(uint64_t c) const;            // chunk c's first byte in the stream
   std::span<const std::byte> chunk(uint64_t c) const;  // chunk c (0: the head) in its slot
+  uint64_t waitForChunks(uint64_t chunks);  // blocks until that many are inflated or the end; how many are
 
   std::span<const std::byte> in_;
   std::size_t capacity_ = 0, headBytes_, chunkBytes_, slots_;
