@@ -93,11 +93,8 @@ Detected detect(std::span<const std::byte> bytes) {
   if (text.empty()) return Detected::kStl;
   if (startsWithPlyLine(text)) return Detected::kPly;
   if (text.starts_with(std::string_view("PK\x03\x04", 4))) return Detected::kThreeMf;
-  if (bytes.size() >= 84) {
-    uint32_t count = 0;
-    for (int i = 3; i >= 0; --i) count = (count << 8) | std::to_integer<uint32_t>(bytes[80 + i]);
-    if (84 + uint64_t{50} * count == bytes.size()) return Detected::kStl;
-  }
+  if (bytes.size() >= 84 && 84 + uint64_t{50} * binaryStlFacetCount(bytes.data()) == bytes.size())
+    return Detected::kStl;
   const std::string_view afterMark = text.substr(text.starts_with("\xEF\xBB\xBF") ? 3 : 0);
   const std::size_t start = std::find_if_not(afterMark.begin(), afterMark.end(), isSpace) - afterMark.begin();
   if (start == afterMark.size() || startsWithSolidWord(afterMark.substr(start))) return Detected::kStl;
@@ -188,8 +185,7 @@ bool parseGzipBinaryStlAhead(std::span<const std::byte> bytes, FacetSoup& soup, 
   // as the start of a PLY header or a ZIP archive, which the general way then decides.
   const std::string_view text(reinterpret_cast<const char*>(header.data()), header.size());
   if (text.starts_with("ply") || text.starts_with(std::string_view("PK\x03\x04", 4))) return false;
-  uint32_t count = 0;
-  for (int i = 3; i >= 0; --i) count = (count << 8) | std::to_integer<uint32_t>(header[80 + i]);
+  const uint32_t count = binaryStlFacetCount(header.data());
   if (count == 0 || kPrefix + uint64_t{kRecord} * count != expected) return false;
   const std::string name = binaryStlHeaderName(header.data());
   reserveHugePages(soup.corners, std::size_t{3} * count);

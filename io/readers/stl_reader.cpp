@@ -509,6 +509,10 @@ std::string binaryStlHeaderName(const std::byte* header) {
   return headerName(header);
 }
 
+uint32_t binaryStlFacetCount(const std::byte* prefix) {
+  return loadLe32(prefix + kBinaryHeaderBytes);
+}
+
 FacetSoup parseStl(std::span<const std::byte> bytes, const std::string& name, StlSource* source) {
   StlSource local;
   StlSource& out = source ? *source : local;

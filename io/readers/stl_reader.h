@@ -54,6 +54,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <span>
 #include <string>
@@ -75,9 +76,11 @@ struct StlSource {
 // on a file that cannot be read or is not a valid STL (see the contract above).
 // For readers that receive a binary STL's bytes in order (the streamed gzip read, mesh_reader.cpp): the
 // corners of `count` 50-byte facet records appended to `corners` (true when a coordinate is NaN or
-// infinite), and the solid name that StlSource gives for an 80-byte header.
+// infinite), the solid name that StlSource gives for an 80-byte header, and the facet count an 84-byte
+// prefix gives (little-endian, after the header).
 bool appendBinaryStlRecords(const std::byte* records, std::size_t count, std::vector<Point3f>& corners);
 std::string binaryStlHeaderName(const std::byte* header);
+uint32_t binaryStlFacetCount(const std::byte* prefix);
 
 FacetSoup readStl(const std::filesystem::path& path, StlSource* source = nullptr);
 
