@@ -180,7 +180,7 @@ TEST(StreamedGzip, GzipChunksGiveTheInflatedBytes) {
 
 TEST(StreamedGzip, DamagedOrUnusualStreamsReadAsSerially) {
   const auto expectSameRead = [](const Bytes& bytes, const std::string& what, double scale = 1.0) {
-    return toposlice::expectSameRead(bytes, what, scale, {3});
+    return toposlice::expectSameRead(bytes, what, scale, {2, 4});
   };
   const FacetSoup femur = readMesh(fixtures::modelPath("derived/femur_S001_sub2.stl.gz"));
   const Bytes stl = binaryStl(femur.corners, "femur");

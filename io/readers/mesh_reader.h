@@ -55,7 +55,7 @@ struct MeshReadOptions {
   std::optional<double> unitMm;              // user's --units: the length of one file unit in mm
   double scale = 1.0;                        // user's --scale: multiplies every coordinate after units
   ChunkRunner runner = serialChunkRunner();  // STL parsing in parallel chunks (stl_reader.h) when parallel
-  // Where a gzip'd binary STL is parsed while it inflates (a parallel runner, units and scale 1), its
+  // Where a gzip'd binary STL is parsed while it inflates (a runner of width 2, units and scale 1), its
   // corners are also welded as they arrive into *weld (core/mesh/weld.h: weldCorners' result, bit for
   // bit), hidden behind the inflate. *weld is left empty otherwise: its facetVertices then do not
   // match the soup's corners, and the caller welds.
