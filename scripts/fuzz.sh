@@ -7,7 +7,7 @@
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]
 #
 # Environment (all optional):
-#   FUZZ_TARGETS     targets to run, default "stl template batch_job plate_job ply mesh"
+#   FUZZ_TARGETS     targets to run, default "stl template batch_job plate_job ply mesh gunzip"
 #   FUZZ_CORPUS_DIR  keep the corpora in FUZZ_CORPUS_DIR/<target> (seeded when empty) so that the next run
 #                    resumes from them; default: a temporary folder, removed after a clean run
 #   FUZZ_KEEP=1      keep the temporary folder (corpora, logs) after a clean run too
@@ -20,7 +20,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$(pwd)
 seconds=${1:-60}
-targets=${FUZZ_TARGETS:-stl template batch_job plate_job ply mesh}
+targets=${FUZZ_TARGETS:-stl template batch_job plate_job ply mesh gunzip}
 build_dir=${FUZZ_BUILD_DIR:-build-fuzz}
 models=${TOPOSLICE_MODELS_DIR:-$repo/../shared/models}
 if ! [[ "$seconds" =~ ^[1-9][0-9]*$ ]]; then
@@ -58,7 +58,7 @@ cmake -S . -B "$build_dir" -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_T
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DCMAKE_CXX_FLAGS="-Wno-unknown-warning-option" \
   -DTOPOSLICE_BUILD_FUZZERS=ON -DTOPOSLICE_SANITIZE=address,undefined \
   -DTOPOSLICE_BUILD_TESTS=OFF -DTOPOSLICE_BUILD_BENCH=OFF >/dev/null
-cmake --build "$build_dir" --parallel "$(nproc)" --target fuzz_stl fuzz_template fuzz_batch_job fuzz_plate_job fuzz_ply fuzz_mesh
+cmake --build "$build_dir" --parallel "$(nproc)" --target fuzz_stl fuzz_template fuzz_batch_job fuzz_plate_job fuzz_ply fuzz_mesh fuzz_gunzip
 
 # --- Corpora ---------------------------------------------------------------------------------------------
 work=$(mktemp -d "${TMPDIR:-/tmp}/toposlice-fuzz.XXXXXX")
@@ -100,6 +100,15 @@ seed_target() {
       chmod u+w "$dir"/*
       head -c 16384 "$models/knee_tibia_ssm_S002.ply" >"$dir/knee_tibia_first16k.ply"  # truncated: an error path
       ;;
+    gunzip)
+      # Settings (fuzz/fuzz_gunzip.cpp) then a piece of a real binary STL: deflated by zlib at level 6
+      # and at level 9 with small blocks, in parts of 64 and 272 bytes; and a gzip stream as it is.
+      local piece=$work/piece.stl
+      binary_stl_head "$models/knee_tibia_ssm_S001.stl" 200 "$piece"  # 10 KB
+      { printf '\x01\x06\x68\x00\x00\x00\x00\x03'; cat "$piece"; } >"$dir/level6_parts64"
+      { printf '\x01\x09\x60\x00\x00\x00\x00\x10'; cat "$piece"; } >"$dir/level9_small_blocks_parts272"
+      { printf '\x00\x00\x00\x00\x00\x00\x00\x03'; gzip -c "$piece"; } >"$dir/gzip_stream_parts64"
+      ;;
   esac
 }
 
@@ -116,7 +125,8 @@ for target in $targets; do
     plate_job) max_len=16384 dict=fuzz/seeds/plate_job.dict ;;
     ply) max_len=16384 dict=fuzz/seeds/ply.dict ;;
     mesh) max_len=16384 dict=fuzz/seeds/mesh.dict ;;
-    *) echo "fuzz: unknown target '$target' (stl, template, batch_job, plate_job, ply, mesh)" >&2; exit 2 ;;
+    gunzip) max_len=16384 dict="" ;;
+    *) echo "fuzz: unknown target '$target' (stl, template, batch_job, plate_job, ply, mesh, gunzip)" >&2; exit 2 ;;
   esac
   corpus=$corpus_root/$target
   mkdir -p "$corpus" "$work/artifacts/$target"

@@ -642,8 +642,9 @@ bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runne
   runner.run(chain.size() - 1, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0 + 1; c < c1 + 1; ++c) {
       const Part& part = *chain[c];
-      std::memcpy(whole + at[c] + part.symbols.size, part.bytes.data + part.seed,
-                  part.bytes.size - part.seed);
+      if (part.bytes.size > part.seed)  // else the part never became plain bytes
+        std::memcpy(whole + at[c] + part.symbols.size, part.bytes.data + part.seed,
+                    part.bytes.size - part.seed);
     }
   });
   // Part c's symbols [from, to) resolved into place; false for a marker before the stream's start.
