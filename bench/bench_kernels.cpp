@@ -19,6 +19,7 @@
 #include "core/slicing/slice_march.h"
 #include "io/masks/mask_png.h"
 #include "io/readers/byte_input.h"
+#include "io/readers/parallel_gunzip.h"
 #include "io/readers/stl_reader.h"
 #include "offset/polygon_offset.h"
 #include "parallel/parallel.h"
@@ -104,6 +105,33 @@ void BM_Inflate(benchmark::State& state) {
   state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) * static_cast<int64_t>(inflatedSize));
 }
 BENCHMARK(BM_Inflate)->DenseRange(0, 2)->UseRealTime()->Unit(benchmark::kMillisecond);
+
+// The parallel inflate (parallel_gunzip.h, the read on more than two threads) into a fresh buffer, CRC-32
+// checked: arg 0 threads, arg 1 parts (0: the default, one per thread). On one thread, 1 part against
+// several gives the cost of a part; against BM_Inflate/1, this decoder's speed against libdeflate's.
+void BM_InflateParallel(benchmark::State& state) {
+  const ByteBuffer file = readWholeFile(modelFile());
+  const auto threads = static_cast<unsigned>(state.range(0));
+  const auto parts = static_cast<std::size_t>(state.range(1));
+  ThreadLimit limit(threads);
+  const ChunkRunner runner = threads > 1 ? parallelChunkRunner() : serialChunkRunner();
+  const std::size_t partBytes = parts == 0 ? 0 : file.size / parts - 64;  // the header is not cut
+  for (auto _ : state) {
+    ByteBuffer out;
+    if (!gunzipParallel(file.view(), runner, out, partBytes)) state.SkipWithError("not handled");
+    benchmark::DoNotOptimize(out.size);
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations()) *
+                          static_cast<int64_t>(gzipSizeHint(file.view())));
+}
+BENCHMARK(BM_InflateParallel)
+    ->Args({1, 1})
+    ->Args({1, 4})
+    ->Args({1, 16})
+    ->Args({2, 0})
+    ->Args({2, 8})
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
 
 void BM_Weld(benchmark::State& state) {
   const Fixture& f = fixture();

@@ -26,26 +26,31 @@ constexpr uint16_t kMarker = 256;        // a symbol kMarker + i stands for byte
 constexpr std::size_t kRoom = 258 + 16;  // output room before a symbol: the longest match and copy overrun
 
 // ---- Huffman decode tables ----
-// An entry: bits 0-3 the code's length, 4-6 its kind, 8-12 extra bits to read (for a subtable pointer,
-// the subtable's index bits), 16-31 the value (a byte, a base length or distance, a subtable's start).
+// An entry: bits 0-7 the bits it takes (the code's and its extra bits), 8-11 the code's length (for a
+// subtable pointer, the subtable's index bits), 12-14 its kind, 16-31 the value (a byte, a base length or
+// distance, a subtable's start). A symbol's bits and its extra bits are dropped in one shift.
 enum Kind : uint32_t { kLiteral = 0, kBase = 1, kEnd = 2, kSubtable = 3, kInvalid = 4 };
 constexpr uint32_t makeEntry(uint32_t kind, uint32_t value = 0, uint32_t extra = 0) {
-  return value << 16 | extra << 8 | kind << 4;
+  return value << 16 | kind << 12 | extra;
 }
 inline uint32_t kindOf(uint32_t e) {
-  return (e >> 4) & 7;
+  return (e >> 12) & 7;
+}
+inline unsigned takenBits(uint32_t e) {
+  return e & 0xFF;
 }
 inline unsigned codeBits(uint32_t e) {
-  return e & 15;
-}
-inline unsigned extraBits(uint32_t e) {
-  return (e >> 8) & 31;
+  return (e >> 8) & 15;
 }
 inline unsigned valueOf(uint32_t e) {
   return e >> 16;
 }
+// The extra bits of entry e, from the bits as they were before e was decoded.
+inline uint32_t extraValue(uint64_t before, uint32_t e) {
+  return static_cast<uint32_t>((before & ((uint64_t{1} << takenBits(e)) - 1)) >> codeBits(e));
+}
 
-constexpr unsigned kLitRoot = 10, kDistRoot = 8, kPreRoot = 7;
+constexpr unsigned kLitRoot = 11, kDistRoot = 8, kPreRoot = 7;
 constexpr std::size_t kLitTable = (1 << kLitRoot) + 288 * (1 << (15 - kLitRoot));
 constexpr std::size_t kDistTable = (1 << kDistRoot) + 32 * (1 << (15 - kDistRoot));
 
@@ -90,6 +95,17 @@ const std::array<uint16_t, 4096>& kraftOfFourLengths() {
   return table;
 }
 
+// Every byte with its bits in reverse order.
+const std::array<uint8_t, 256>& reversedByte() {
+  static const std::array<uint8_t, 256> table = [] {
+    std::array<uint8_t, 256> t{};
+    for (unsigned b = 0; b < 256; ++b)
+      for (unsigned i = 0; i < 8; ++i) t[b] = static_cast<uint8_t>(t[b] | ((b >> i) & 1) << (7 - i));
+    return t;
+  }();
+  return table;
+}
+
 // The decode table of the canonical code with `lengths` (0: symbol unused) into `table`. False for an
 // over-subscribed code, and for an incomplete one unless `incompleteOk` and it has no code or a single
 // one-bit code (zlib's rule; the code-length code must be complete).
@@ -111,24 +127,35 @@ bool buildTable(const uint8_t* lengths, unsigned n, const uint32_t* payload, uns
     code = (code + count[len - 1]) << 1;
     next[len] = code;
   }
+  // A complete code writes every entry; only an incomplete one leaves some to mark invalid.
   const uint32_t invalid = makeEntry(kInvalid);
-  std::fill(table, table + (std::size_t{1} << root), invalid);
+  const bool complete = left == 0;
+  if (!complete) std::fill(table, table + (std::size_t{1} << root), invalid);
   const unsigned subBits = maxLen > root ? maxLen - root : 0;
   uint32_t nextSub = 1u << root;
+  auto reversedCode = [&](unsigned len) {  // deflate sends a code's bits from its first on
+    const uint32_t code = next[len]++;
+    return (reversedByte()[code & 255] << 8 | reversedByte()[code >> 8]) >> (16 - len);
+  };
+  if (complete && maxLen > root) {  // the entries that will point to subtables may hold an old table's
+    const std::array<unsigned, 16> first = std::to_array(next);
+    for (unsigned s = 0; s < n; ++s)
+      if (lengths[s] > root) table[reversedCode(lengths[s]) & ((1u << root) - 1)] = invalid;
+    std::copy(first.begin(), first.end(), next);
+  }
   for (unsigned s = 0; s < n; ++s) {
     const unsigned len = lengths[s];
     if (len == 0) continue;
-    uint32_t code = next[len]++, reversed = 0;  // deflate sends a code's bits from its first on
-    for (unsigned b = 0; b < len; ++b, code >>= 1) reversed = reversed << 1 | (code & 1);
-    const uint32_t e = payload[s] | len;
+    const uint32_t reversed = reversedCode(len);
+    const uint32_t e = payload[s] + len + (len << 8);
     if (len <= root) {
       for (uint32_t i = reversed; i < (1u << root); i += 1u << len) table[i] = e;
       continue;
     }
     uint32_t& pointer = table[reversed & ((1u << root) - 1)];
     if (kindOf(pointer) != kSubtable) {
-      pointer = makeEntry(kSubtable, nextSub, subBits);
-      std::fill(table + nextSub, table + nextSub + (std::size_t{1} << subBits), invalid);
+      pointer = makeEntry(kSubtable, nextSub) | subBits << 8;
+      if (!complete) std::fill(table + nextSub, table + nextSub + (std::size_t{1} << subBits), invalid);
       nextSub += 1u << subBits;
     }
     for (uint32_t i = reversed >> root; i < (1u << subBits); i += 1u << (len - root))
@@ -154,7 +181,7 @@ class BitReader {
   bool overrun() const { return position() > uint64_t{data_.size()} * 8; }
 
   void refill() {
-    if (data_.size() - std::min(pos_, data_.size()) >= 8) {
+    if (pos_ + 8 <= data_.size()) {
       buffer_ |= load64(data_.data() + pos_) << avail_;
       pos_ += (63 - avail_) >> 3;
       avail_ |= 56;
@@ -195,12 +222,19 @@ class BitReader {
   unsigned avail_ = 0;
 };
 
-// One code's symbol from the reader (refilled by the caller), its bits dropped.
+// Entry of the code that starts at the low end of `bits`.
+template <unsigned kRoot>
+inline uint32_t lookup(const uint32_t* table, uint64_t bits) {
+  const uint32_t e = table[bits & ((1u << kRoot) - 1)];
+  if (kindOf(e) != kSubtable) return e;
+  return table[valueOf(e) + ((bits >> kRoot) & ((1u << codeBits(e)) - 1))];
+}
+
+// One code's symbol from the reader (refilled by the caller), its bits dropped (a code with no extra bits).
 template <unsigned kRoot>
 inline uint32_t decodeSymbol(const uint32_t* table, BitReader& r) {
-  uint32_t e = table[r.bits() & ((1u << kRoot) - 1)];
-  if (kindOf(e) == kSubtable) e = table[valueOf(e) + ((r.bits() >> kRoot) & ((1u << extraBits(e)) - 1))];
-  r.drop(codeBits(e));
+  const uint32_t e = lookup<kRoot>(table, r.bits());
+  r.drop(takenBits(e));
   return e;
 }
 
@@ -400,13 +434,12 @@ class Inflater {
     return true;
   }
 
-  // Length and distance of a match whose length symbol is `e` (the reader refilled before the symbol:
-  // 15 + 5 + 15 + 13 bits at most). Zero distance for an invalid distance code.
-  static uint32_t matchDistance(BitReader& r, const uint32_t* dist, unsigned& length, uint32_t e) {
-    length = valueOf(e) + r.take(extraBits(e));
-    const uint32_t d = decodeSymbol<kDistRoot>(dist, r);
-    if (kindOf(d) != kBase) return 0;
-    return valueOf(d) + r.take(extraBits(d));
+  // The distance of a match (the reader holding 28 bits or more); zero for an invalid distance code.
+  static uint32_t matchDistance(BitReader& r, const uint32_t* dist) {
+    const uint64_t before = r.bits();
+    const uint32_t d = lookup<kDistRoot>(dist, before);
+    r.drop(takenBits(d));
+    return kindOf(d) == kBase ? valueOf(d) + extraValue(before, d) : 0;
   }
 
   // The block's coded data into bytes whose window is complete (everything before is in `out`). The
@@ -427,10 +460,14 @@ class Inflater {
         capacity = out.capacity;
       }
       r.refill();
-      uint32_t e = decodeSymbol<kLitRoot>(lit, r);
+      uint64_t before = r.bits();
+      uint32_t e = lookup<kLitRoot>(lit, before);
+      r.drop(takenBits(e));
       if (kindOf(e) == kLiteral) {
         data[size++] = static_cast<uint8_t>(valueOf(e));
-        e = decodeSymbol<kLitRoot>(lit, r);  // a second literal fits the bits refilled
+        before = r.bits();  // 41 bits or more: a second symbol and its extra bits fit
+        e = lookup<kLitRoot>(lit, before);
+        r.drop(takenBits(e));
         if (kindOf(e) == kLiteral) {
           data[size++] = static_cast<uint8_t>(valueOf(e));
           continue;
@@ -441,8 +478,8 @@ class Inflater {
         ok = kindOf(e) == kEnd && !r.overrun();
         break;
       }
-      unsigned length;
-      const uint32_t distance = matchDistance(r, dist, length, e);
+      const unsigned length = valueOf(e) + extraValue(before, e);
+      const uint32_t distance = matchDistance(r, dist);
       if (distance == 0 || distance > size) break;
       uint8_t* to = data + size;
       const uint8_t* from = to - distance;
@@ -483,7 +520,9 @@ class Inflater {
         capacity = out.capacity;
       }
       r.refill();
-      const uint32_t e = decodeSymbol<kLitRoot>(lit, r);
+      const uint64_t before = r.bits();
+      const uint32_t e = lookup<kLitRoot>(lit, before);
+      r.drop(takenBits(e));
       if (kindOf(e) == kLiteral) {
         data[size++] = static_cast<uint16_t>(valueOf(e));
         continue;
@@ -492,8 +531,8 @@ class Inflater {
         ok = kindOf(e) == kEnd && !r.overrun();
         break;
       }
-      unsigned length;
-      const uint32_t distance = matchDistance(r, dist, length, e);
+      const unsigned length = valueOf(e) + extraValue(before, e);
+      const uint32_t distance = matchDistance(r, dist);
       if (distance == 0 || distance > size + kWindow) break;
       uint16_t* const to = data + size;
       uint16_t seen = 0;
@@ -576,11 +615,7 @@ bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runne
   if (expected == 0 || expected != isize) return false;
   const std::span<const uint8_t> data = in.subspan(headerLength, in.size() - 8 - headerLength);
 
-  if (partBytes == 0) {
-    partBytes = kGunzipPartBytes;
-    const std::size_t perThread = data.size() / (4 * std::max(1u, runner.width));
-    partBytes = std::clamp<std::size_t>(perThread, std::size_t{128} << 10, partBytes);
-  }
+  if (partBytes == 0) partBytes = std::max(data.size() / std::max(1u, runner.width), kGunzipMinPartBytes);
   const std::size_t parts = std::max<std::size_t>(1, data.size() / std::max<std::size_t>(partBytes, 1));
   auto offset = [&](std::size_t j) { return uint64_t{data.size()} * j / parts * 8; };  // in bits
 

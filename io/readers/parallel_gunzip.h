@@ -25,13 +25,14 @@
 
 namespace toposlice {
 
-// Compressed bytes per part when the caller does not choose: small enough that every thread gets
-// several, large enough that finding a block start (about one block's bits scanned) stays a few percent.
-constexpr std::size_t kGunzipPartBytes = std::size_t{1} << 20;
+// The smallest part when the caller does not choose. Each part after the first costs about 1.5 ms of
+// extra work (finding its start, the marker stretch, resolving it, a copy), measured on the aligner model
+// (docs/BENCHMARKS.md, thread scaling, "Session 22"): one part per thread, but none smaller than this.
+constexpr std::size_t kGunzipMinPartBytes = std::size_t{256} << 10;
 
 // Inflates `in` into `out` on `runner` (which may be serial), in parts of about `partBytes` compressed
-// bytes (0: kGunzipPartBytes, fewer and larger parts where the stream is small for the runner's width).
-// False when not handled, see above; `out` is then unspecified.
+// bytes (0: one part per thread of the runner, at least kGunzipMinPartBytes). False when not handled,
+// see above; `out` is then unspecified.
 bool gunzipParallel(std::span<const std::byte> in, const ChunkRunner& runner, ByteBuffer& out,
                     std::size_t partBytes = 0);
 
