@@ -632,11 +632,15 @@ bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runne
         inflater->decode(decoded[0], 0, stop, true);
         continue;
       }
-      // The first position whose block decodes; past damage (a later block invalid) no other is tried.
-      for (uint64_t bit = offset(j); bit < offset(j + 1); ++bit) {
-        if (inflater->plausibleStart(bit) &&
-            inflater->decode(decoded[j], bit, stop, false) != Inflater::Outcome::kFirstBlockInvalid)
-          break;
+      // The first position whose block decodes; past damage (a later block invalid) no other is tried,
+      // nor after kTrials headers whose block did not decode (a stream made to look like many headers:
+      // the chain then decodes through this part from the end of the one before).
+      constexpr int kTrials = 64;
+      int trials = 0;
+      for (uint64_t bit = offset(j); bit < offset(j + 1) && trials < kTrials; ++bit) {
+        if (!inflater->plausibleStart(bit)) continue;
+        ++trials;
+        if (inflater->decode(decoded[j], bit, stop, false) != Inflater::Outcome::kFirstBlockInvalid) break;
       }
     }
   });
