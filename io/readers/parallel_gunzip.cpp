@@ -281,13 +281,19 @@ class Inflater {
   Inflater(std::span<const uint8_t> data, std::size_t limit, std::size_t sizeHint)
       : reader_(data), limit_(limit), sizeHint_(sizeHint) {}
 
-  enum class Outcome { kDecoded, kFirstBlockInvalid, kLaterBlockInvalid };
+  // Decodes blocks from `beginBit` until one ends at or after `stopBit`, or the last block ends; false
+  // for invalid data. With `knownStart` the part starts the stream (no window: plain bytes into
+  // part.bytes); otherwise symbols with markers first.
+  bool decode(Part& part, uint64_t beginBit, uint64_t stopBit, bool knownStart) {
+    begin(part, beginBit, knownStart);
+    Step step = Step::kMore;
+    while (step == Step::kMore) step = next(part, stopBit);
+    return step == Step::kDone;
+  }
 
-  // Decodes blocks from `beginBit` until one ends at or after `stopBit`, or the last block ends. With
-  // `knownStart` the part starts the stream (no window: plain bytes into part.bytes); otherwise symbols
-  // with markers first. The outcome tells a start that is no block's (its first block is invalid) from
-  // damage further on.
-  Outcome decode(Part& part, uint64_t beginBit, uint64_t stopBit, bool knownStart) {
+  // decode() a block at a time: begin(), then next() until it is done or invalid.
+  enum class Step { kMore, kDone, kInvalid };
+  void begin(Part& part, uint64_t beginBit, bool knownStart) {
     part.beginBit = beginBit;
     part.decoded = part.final = false;
     part.symbols.size = part.bytes.size = part.seed = 0;
@@ -295,15 +301,15 @@ class Inflater {
     bytesMode_ = knownStart;
     lastMarkerEnd_ = 0;
     reader_.seek(beginBit);
-    for (bool first = true;; first = false) {
-      if (!block(part)) return first ? Outcome::kFirstBlockInvalid : Outcome::kLaterBlockInvalid;
-      if (!bytesMode_ && part.symbols.size - lastMarkerEnd_ >= kWindow) switchToBytes(part);
-      if (part.final || reader_.position() >= stopBit) break;
-    }
-    if (reader_.overrun()) return Outcome::kLaterBlockInvalid;
+  }
+  Step next(Part& part, uint64_t stopBit) {
+    if (!block(part)) return Step::kInvalid;
+    if (!bytesMode_ && part.symbols.size - lastMarkerEnd_ >= kWindow) switchToBytes(part);
+    if (!part.final && reader_.position() < stopBit) return Step::kMore;
+    if (reader_.overrun()) return Step::kInvalid;
     part.endBit = reader_.position();
     part.decoded = true;
-    return Outcome::kDecoded;
+    return Step::kDone;
   }
 
   // A dynamic block header that parses at `bit` into valid tables (the start of a part, if its blocks
@@ -582,6 +588,41 @@ class Inflater {
   std::array<uint32_t, 1 << kPreRoot> pre_{};
 };
 
+// Symbols with markers as bytes into `out`, given the bytes before the part (`window`: its last 32 KiB,
+// or all of them when the stream had fewer); false for a marker before the stream's start.
+bool resolveSymbols(std::span<const uint16_t> symbols, std::span<const std::byte> window, std::byte* out) {
+  const std::size_t missing = kWindow - window.size();  // window bytes before the stream's start
+  for (std::size_t i = 0; i < symbols.size(); ++i) {
+    const uint16_t s = symbols[i];
+    if (s < kMarker) {
+      out[i] = static_cast<std::byte>(s);
+    } else {
+      const std::size_t index = std::size_t{s} - kMarker;  // in the 32 KiB before the part
+      if (index < missing) return false;
+      out[i] = window[index - missing];
+    }
+  }
+  return true;
+}
+
+// Starts `part` at the first position in [from, to) whose block decodes (no window known) and decodes
+// that block: the outcome of that first block, or kInvalid when there is none -- after kTrials headers
+// whose block did not decode it gives up too (a stream made to look like many headers). Past damage in a
+// later block no other start is tried: the caller sees it as kInvalid from next().
+Inflater::Step startAtFirstBlock(Inflater& inflater, Part& part, uint64_t from, uint64_t to,
+                                 uint64_t stopBit) {
+  constexpr int kTrials = 64;
+  int trials = 0;
+  for (uint64_t bit = from; bit < to && trials < kTrials; ++bit) {
+    if (!inflater.plausibleStart(bit)) continue;
+    ++trials;
+    inflater.begin(part, bit, false);
+    const Inflater::Step step = inflater.next(part, stopBit);
+    if (step != Inflater::Step::kInvalid) return step;
+  }
+  return Inflater::Step::kInvalid;
+}
+
 // The gzip member header's length, or 0 when it is not the common case (method 8, no reserved flag).
 std::size_t gzipHeaderLength(std::span<const uint8_t> in) {
   constexpr uint8_t kHcrc = 2, kExtra = 4, kName = 8, kComment = 16, kReserved = 0xE0;
@@ -632,16 +673,8 @@ bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runne
         inflater->decode(decoded[0], 0, stop, true);
         continue;
       }
-      // The first position whose block decodes; past damage (a later block invalid) no other is tried,
-      // nor after kTrials headers whose block did not decode (a stream made to look like many headers:
-      // the chain then decodes through this part from the end of the one before).
-      constexpr int kTrials = 64;
-      int trials = 0;
-      for (uint64_t bit = offset(j); bit < offset(j + 1) && trials < kTrials; ++bit) {
-        if (!inflater->plausibleStart(bit)) continue;
-        ++trials;
-        if (inflater->decode(decoded[j], bit, stop, false) != Inflater::Outcome::kFirstBlockInvalid) break;
-      }
+      Inflater::Step step = startAtFirstBlock(*inflater, decoded[j], offset(j), offset(j + 1), stop);
+      while (step == Inflater::Step::kMore) step = inflater->next(decoded[j], stop);
     }
   });
 
@@ -663,7 +696,7 @@ bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runne
       if (!bridger) bridger = std::make_unique<Inflater>(data, expected, expected / parts);
       Part& bridge = bridges.emplace_back();
       const uint64_t stop = j + 1 < parts ? offset(j + 1) : UINT64_MAX;
-      if (bridger->decode(bridge, last.endBit, stop, false) != Inflater::Outcome::kDecoded) return false;
+      if (!bridger->decode(bridge, last.endBit, stop, false)) return false;
       at.push_back(at.back() + last.size());
       chain.push_back(&bridge);
       continue;
@@ -688,20 +721,9 @@ bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runne
   });
   // Part c's symbols [from, to) resolved into place; false for a marker before the stream's start.
   auto resolve = [&](std::size_t c, std::size_t from, std::size_t to) {
-    const Part& part = *chain[c];
-    const std::byte* window = whole + at[c] - std::min<std::size_t>(at[c], kWindow);
-    const std::size_t missing = kWindow - std::min<std::size_t>(at[c], kWindow);  // before the stream
-    for (std::size_t i = from; i < to; ++i) {
-      const uint16_t s = part.symbols.data[i];
-      if (s < kMarker) {
-        whole[at[c] + i] = static_cast<std::byte>(s);
-      } else {
-        const std::size_t index = s - kMarker;  // in the 32 KiB before the part
-        if (index < missing) return false;
-        whole[at[c] + i] = window[index - missing];
-      }
-    }
-    return true;
+    const std::size_t before = std::min<std::size_t>(at[c], kWindow);
+    return resolveSymbols(std::span<const uint16_t>(chain[c]->symbols.data + from, to - from),
+                          {whole + at[c] - before, before}, whole + at[c] + from);
   };
   // The last 32 KiB of every part first, in stream order: they are the windows of the parts after them.
   // Then the rest of every part at once.
