@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "parallel/parallel.h"
+#include "tests/fixtures/gzip_bytes.h"
 #include "tests/fixtures/models.h"
 
 namespace toposlice {
@@ -25,17 +26,7 @@ struct Settings {
 };
 
 Bytes deflated(const Bytes& in, const Settings& s) {
-  z_stream z{};
-  EXPECT_EQ(deflateInit2(&z, s.level, Z_DEFLATED, 16 + s.windowBits, s.memLevel, s.strategy), Z_OK);
-  Bytes out(deflateBound(&z, static_cast<uLong>(in.size())) + 64);
-  z.next_in = const_cast<Bytef*>(reinterpret_cast<const Bytef*>(in.data()));
-  z.avail_in = static_cast<uInt>(in.size());
-  z.next_out = reinterpret_cast<Bytef*>(out.data());
-  z.avail_out = static_cast<uInt>(out.size());
-  EXPECT_EQ(deflate(&z, Z_FINISH), Z_STREAM_END);
-  out.resize(z.total_out);
-  deflateEnd(&z);
-  return out;
+  return fixtures::gzipped(in, s.level, s.strategy, s.memLevel, s.windowBits);
 }
 
 // zlib's inflate of one member, nothing after it; false for anything else.

@@ -1,7 +1,8 @@
-// The streamed gzip read (io/readers/byte_input.h GzipChunks, mesh_reader.cpp): a gzip'd binary STL read
-// on more than one thread is parsed, and welded, while it inflates. Against the serial read: the same
-// soup, source and weld, or the same error message, for the shared models and for streams damaged in
-// every way the stream can end early, run long or lie about its size.
+// The threaded gzip reads (mesh_reader.cpp): on two threads a gzip'd binary STL is parsed, and welded,
+// while it inflates (io/readers/byte_input.h GzipChunks); on more, every thread inflates a part of the
+// stream (io/readers/parallel_gunzip.h) before the parse. Against the serial read: the same soup, source
+// and weld, or the same error message, for the shared models and for streams damaged in every way the
+// stream can end early, run long or lie about its size.
 #include <gtest/gtest.h>
 #include <zlib.h>
 
@@ -77,7 +78,7 @@ Outcome readWith(const Bytes& bytes, const ChunkRunner& runner, bool weld, doubl
   return o;
 }
 
-// The serial read and the streamed one (2 and 3 threads, with and without the weld) agree; the weld is
+// The serial read and the threaded ones (2 and 3 threads, with and without the weld) agree; the weld is
 // either left empty or is the serial weld of the soup. Returns whether the streamed read welded.
 bool expectSameRead(const Bytes& bytes, const std::string& what, double scale = 1.0,
                     std::initializer_list<unsigned> threadCounts = {2, 3}) {

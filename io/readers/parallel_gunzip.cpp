@@ -262,6 +262,16 @@ struct Output {
     reserve(std::max<std::size_t>(capacity + capacity / 2, size + 4 * kRoom));
     return true;
   }
+  // room() for a loop that holds the pointer, size and capacity in locals (codedBytes): they are
+  // refreshed where the array grew.
+  bool room(std::size_t limit, T*& localData, std::size_t localSize, std::size_t& localCapacity) {
+    if (localCapacity - localSize >= kRoom) return true;
+    size = localSize;
+    if (!room(limit)) return false;
+    localData = data;
+    localCapacity = capacity;
+    return true;
+  }
 };
 
 // ---- One part ----
@@ -459,12 +469,7 @@ class Inflater {
     std::size_t size = out.size, capacity = out.capacity;
     bool ok = false;
     for (;;) {
-      if (capacity - size < kRoom) {
-        out.size = size;
-        if (!out.room(limit_)) break;
-        data = out.data;
-        capacity = out.capacity;
-      }
+      if (!out.room(limit_, data, size, capacity)) break;
       r.refill();
       uint64_t before = r.bits();
       uint32_t e = lookup<kLitRoot>(lit, before);
@@ -519,12 +524,7 @@ class Inflater {
     std::size_t size = out.size, capacity = out.capacity, lastMarkerEnd = lastMarkerEnd_;
     bool ok = false;
     for (;;) {
-      if (capacity - size < kRoom) {
-        out.size = size;
-        if (!out.room(limit_)) break;
-        data = out.data;
-        capacity = out.capacity;
-      }
+      if (!out.room(limit_, data, size, capacity)) break;
       r.refill();
       const uint64_t before = r.bits();
       const uint32_t e = lookup<kLitRoot>(lit, before);
