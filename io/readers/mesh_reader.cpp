@@ -223,8 +223,9 @@ FacetSoup parseMesh(std::span<const std::byte> bytes, const std::string& name, c
   if (isGzip(bytes)) {
     out.gzip = true;
     // Two threads: ISA-L inflates on one while the other parses and welds (the streamed read). More:
-    // every thread inflates a part of the stream, and the parse and the weld then use them all
-    // (docs/BENCHMARKS.md, thread scaling, "Session 22": on two threads the streamed read is faster).
+    // every thread inflates a part of the stream, and the parse (and from four threads the weld) then
+    // use them all (docs/BENCHMARKS.md, thread scaling, "Session 22": on two threads the streamed read
+    // is faster, and libdeflate for text).
     constexpr unsigned kStreamedWidth = 2;
     if (options.runner.width > kStreamedWidth) {
       ByteBuffer inflated;
