@@ -75,6 +75,25 @@ bool isGzip(std::span<const std::byte> bytes) {
   return bytes.size() >= 2 && bytes[0] == std::byte{0x1F} && bytes[1] == std::byte{0x8B};
 }
 
+std::size_t plainGzipHeaderLength(std::span<const std::byte> bytes) {
+  constexpr uint8_t kDeflate = 8, kHcrc = 2, kExtra = 4, kName = 8, kComment = 16, kReserved = 0xE0;
+  const std::span<const uint8_t> in(reinterpret_cast<const uint8_t*>(bytes.data()), bytes.size());
+  if (in.size() < 18 || !isGzip(bytes) || in[2] != kDeflate || (in[3] & kReserved) != 0) return 0;
+  std::size_t at = 10;
+  const uint8_t flags = in[3];
+  if (flags & kExtra) {
+    if (at + 2 > in.size()) return 0;
+    at += 2 + (in[at] | in[at + 1] << 8);
+  }
+  for (const uint8_t flag : {kName, kComment}) {
+    if (!(flags & flag)) continue;
+    while (at < in.size() && in[at] != 0) ++at;
+    ++at;
+  }
+  if (flags & kHcrc) at += 2;
+  return at + 8 <= in.size() ? at : 0;
+}
+
 std::size_t gzipSizeHint(std::span<const std::byte> in) {
   if (in.size() < 18) return 0;
   const std::byte* p = in.data() + in.size() - 4;
@@ -162,12 +181,9 @@ GzipChunks::GzipChunks(std::span<const std::byte> in, std::size_t headBytes, std
                        std::size_t slots)
     : in_(in), capacity_(gzipSizeHint(in)), headBytes_(headBytes), chunkBytes_(chunkBytes), slots_(slots) {
   // ISA-L counts input and output in 32 bits; a size of 0 (an empty or forged trailer) is not the common
-  // case. Nor is a header with another method or a reserved flag bit set: libdeflate and zlib refuse
-  // those where ISA-L reads on, and the result must not depend on which of them read the stream.
-  constexpr uint8_t kDeflate = 8, kReservedFlags = 0xE0;
-  const bool plainHeader = in.size() >= 10 && isGzip(in) && std::to_integer<uint8_t>(in[2]) == kDeflate &&
-                           (std::to_integer<uint8_t>(in[3]) & kReservedFlags) == 0;
-  if (!plainHeader || capacity_ == 0 || in.size() > UINT32_MAX || headBytes_ > UINT32_MAX ||
+  // case. Nor is a header that is not plain (plainGzipHeaderLength): the result must not depend on which
+  // inflater read the stream.
+  if (plainGzipHeaderLength(in) == 0 || capacity_ == 0 || in.size() > UINT32_MAX || headBytes_ > UINT32_MAX ||
       chunkBytes_ == 0 || chunkBytes_ > UINT32_MAX || slots_ == 0) {
     publish(kEnded);
     return;

@@ -42,6 +42,11 @@ ByteBuffer readWholeFile(const std::filesystem::path& path);
 
 bool isGzip(std::span<const std::byte> bytes);
 
+// The length of the gzip member header `in` starts with, when it is the common case that every inflater
+// here reads alike -- method 8, no reserved flag bit (libdeflate and zlib refuse those, ISA-L reads on),
+// its optional fields whole and room for the 8-byte trailer after it -- and 0 otherwise.
+std::size_t plainGzipHeaderLength(std::span<const std::byte> in);
+
 // The last member's ISIZE trailer (the uncompressed size mod 2^32), capped; 0 when too short. A hint only.
 std::size_t gzipSizeHint(std::span<const std::byte> in);
 

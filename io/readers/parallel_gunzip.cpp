@@ -623,31 +623,12 @@ Inflater::Step startAtFirstBlock(Inflater& inflater, Part& part, uint64_t from, 
   return Inflater::Step::kInvalid;
 }
 
-// The gzip member header's length, or 0 when it is not the common case (method 8, no reserved flag).
-std::size_t gzipHeaderLength(std::span<const uint8_t> in) {
-  constexpr uint8_t kHcrc = 2, kExtra = 4, kName = 8, kComment = 16, kReserved = 0xE0;
-  if (in.size() < 18 || in[0] != 0x1F || in[1] != 0x8B || in[2] != 8 || (in[3] & kReserved) != 0) return 0;
-  std::size_t at = 10;
-  const uint8_t flags = in[3];
-  if (flags & kExtra) {
-    if (at + 2 > in.size()) return 0;
-    at += 2 + (in[at] | in[at + 1] << 8);
-  }
-  for (const uint8_t flag : {kName, kComment}) {
-    if (!(flags & flag)) continue;
-    while (at < in.size() && in[at] != 0) ++at;
-    ++at;
-  }
-  if (flags & kHcrc) at += 2;
-  return at + 8 <= in.size() ? at : 0;
-}
-
 }  // namespace
 
 bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runner, ByteBuffer& out,
                     std::size_t partBytes) {
   const std::span<const uint8_t> in(reinterpret_cast<const uint8_t*>(inBytes.data()), inBytes.size());
-  const std::size_t headerLength = gzipHeaderLength(in);
+  const std::size_t headerLength = plainGzipHeaderLength(inBytes);
   if (headerLength == 0) return false;
   const std::size_t expected = gzipSizeHint(inBytes);
   const uint8_t* trailer = in.data() + in.size() - 8;
@@ -692,17 +673,16 @@ bool gunzipParallel(std::span<const std::byte> inBytes, const ChunkRunner& runne
     if (parts == 1) return false;
     std::size_t j = 1;  // the part whose offsets hold the end: its start must be there
     while (j + 1 < parts && offset(j + 1) <= last.endBit) ++j;
-    if (!(decoded[j].decoded && decoded[j].beginBit == last.endBit)) {
+    const Part* next = &decoded[j];
+    if (!(next->decoded && next->beginBit == last.endBit)) {
       if (!bridger) bridger = std::make_unique<Inflater>(data, expected, expected / parts);
       Part& bridge = bridges.emplace_back();
       const uint64_t stop = j + 1 < parts ? offset(j + 1) : UINT64_MAX;
       if (!bridger->decode(bridge, last.endBit, stop, false)) return false;
-      at.push_back(at.back() + last.size());
-      chain.push_back(&bridge);
-      continue;
+      next = &bridge;
     }
     at.push_back(at.back() + last.size());
-    chain.push_back(&decoded[j]);
+    chain.push_back(next);
   }
   const Part& lastPart = *chain.back();
   // After the last block, the trailer follows at once (one member, nothing after it).
