@@ -564,6 +564,55 @@ TEST(PngEncode, ZlibInflatesRandomRunImages) {
   }
 }
 
+TEST(RunDeflater, ByteStringsCodeAsTheirBytesOneByOne) {
+  // putByteString (the edge pixels of anti-aliased rows) gives the tokens of putBytes(byte, 1) for each
+  // byte: literals, runs that start inside a string, continue the bytes before it or go on into the
+  // next call, strings longer than the token buffer of a fresh scratch; and zlib inflates the stream.
+  std::mt19937 rng(2027);
+  for (int trial = 0; trial < 200; ++trial) {
+    DeflateScratch oneScratch, stringScratch;
+    RunDeflater one(oneScratch, 1), strings(stringScratch, 1);
+    std::vector<uint8_t> expected;
+    const int pieces = 1 + static_cast<int>(rng() % 12);
+    for (int k = 0; k < pieces; ++k) {
+      if (rng() % 3 == 0) {  // a run by putBytes, on both
+        const uint8_t v =
+            static_cast<uint8_t>(rng() % 4 == 0 ? expected.empty() ? 7 : expected.back() : rng() % 6);
+        const uint64_t count = 1 + rng() % 700;
+        one.putBytes(v, count);
+        strings.putBytes(v, count);
+        expected.insert(expected.end(), count, v);
+        continue;
+      }
+      const std::size_t size = trial % 10 == 0 ? 5000 + rng() % 20000 : rng() % 300;
+      std::vector<uint8_t> bytes(size);
+      for (std::size_t i = 0; i < size; ++i)  // few values: runs of every length, literals between them
+        bytes[i] =
+            static_cast<uint8_t>(i > 0 && rng() % 3 == 0 ? bytes[i - 1] : rng() % (trial % 2 ? 4 : 256));
+      for (uint8_t b : bytes) one.putBytes(b, 1);
+      strings.putByteString(bytes.data(), bytes.size());
+      expected.insert(expected.end(), bytes.begin(), bytes.end());
+    }
+    if (expected.empty()) continue;
+    std::vector<uint8_t> a, b;
+    a.resize(one.writeBlock(a, 0, DeflateCode::smallest));
+    b.resize(strings.writeBlock(b, 0, DeflateCode::smallest));
+    ASSERT_EQ(a, b) << "trial " << trial;
+    std::vector<uint8_t> inflated(expected.size() + 1);
+    z_stream z{};
+    ASSERT_EQ(inflateInit2(&z, -15), Z_OK);
+    z.next_in = b.data();
+    z.avail_in = static_cast<uInt>(b.size());
+    z.next_out = inflated.data();
+    z.avail_out = static_cast<uInt>(inflated.size());
+    const int rc = inflate(&z, Z_FINISH);
+    inflateEnd(&z);
+    ASSERT_EQ(rc, Z_STREAM_END) << "trial " << trial;
+    inflated.resize(inflated.size() - z.avail_out);
+    ASSERT_EQ(inflated, expected) << "trial " << trial;
+  }
+}
+
 TEST(PngEncode, BinaryMasksFromRunsGiveTheSameBytes) {
   // The coder reads a binary mask from its rows' runs when it has them (mask_image.h): the same PNG as
   // from the pixels, with or without extents, under both codes; repeated, dark and full rows, runs

@@ -450,6 +450,35 @@ void RunDeflater::flush() {
   pending_ = 0;
 }
 
+void RunDeflater::putByteString(const uint8_t* bytes, size_t count) {
+  size_t i = 0;
+  while (i < count) {
+    const uint8_t v = bytes[i];
+    if (v == last_) {  // a run goes on
+      const size_t e = runEnd(bytes, i + 1, count, v);
+      pending_ += e - i;
+      i = e;
+      continue;
+    }
+    if (pending_ != 0) flush();
+    // Literals up to the first byte that repeats the one before it (no run pending among them).
+    if (size_ + (count - i) > tokens_.size())
+      tokens_.resize(std::max(2 * tokens_.size(), size_ + (count - i)));
+    uint16_t* const out = tokens_.data() + size_;
+    size_t k = 0;
+    uint8_t last = v;
+    for (;;) {
+      out[k++] = last;
+      ++counts_[last];
+      if (++i == count || bytes[i] == last) break;
+      last = bytes[i];
+    }
+    size_ += k;
+    expanded_ += k;
+    last_ = last;
+  }
+}
+
 void RunDeflater::putCopy(uint64_t count, uint8_t lastByte) {
   assert(count >= 3 && copyDistance_ > 1);
   flush();
@@ -548,30 +577,6 @@ size_t runEnd(const uint8_t* row, size_t p, size_t end, uint8_t v) {
   }
   while (p < end && row[p] == v) ++p;
   return p;
-}
-
-RowRunScanner::RowRunScanner(const MaskImage& mask, size_t stored)
-    : row_(mask.pixels.data() + stored * mask.width) {
-  if (mask.hasFills()) {
-    fill_ = mask.fills.data() + 3 * size_t{mask.rowFills[2 * stored]};
-    fillsEnd_ = fill_ + 3 * size_t{mask.rowFills[2 * stored + 1]};
-  }
-}
-
-size_t RowRunScanner::runEnd(size_t p, size_t end, uint8_t v) {
-  for (;;) {
-    while (fill_ != fillsEnd_ && fill_[1] <= p) fill_ += 3;
-    if (fill_ != fillsEnd_ && fill_[0] <= p) {  // inside a stretch of one value
-      if (fill_[2] != v) return p;
-      p = fill_[1];
-      if (p >= end) return end;
-      continue;
-    }
-    const size_t limit = fill_ != fillsEnd_ ? std::min<size_t>(fill_[0], end) : end;
-    const size_t e = toposlice::runEnd(row_, p, limit, v);
-    if (e < limit || limit == end) return e;
-    p = limit;  // a stretch starts here
-  }
 }
 
 }  // namespace toposlice

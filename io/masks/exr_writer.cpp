@@ -57,13 +57,25 @@ void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& 
     if (begin >= end) begin = end = width;
   }
   if (begin > 0) runs.push_back(static_cast<uint32_t>(begin));
-  RowRunScanner scanner(mask, stored);  // jumps over the fills of an anti-aliased layer
-  for (size_t p = begin; p < end;) {
-    const uint8_t v = row[p];
-    const size_t e = scanner.runEnd(p, end, v);
-    runs.push_back(uint32_t{v} << 24 | static_cast<uint32_t>(e - p));
-    p = e;
-  }
+  // Runs stay maximal: one that continues the row's last run (a fill after pixels of its value, or the
+  // other way round) joins it.
+  const size_t first = runs.size();
+  const auto put = [&](size_t a, size_t b, uint8_t value) {
+    if (runs.size() > first && runs.back() >> 24 == value) {
+      runs.back() += static_cast<uint32_t>(b - a);
+    } else {
+      runs.push_back(uint32_t{value} << 24 | static_cast<uint32_t>(b - a));
+    }
+  };
+  // The fills of an anti-aliased layer are not read.
+  forEachRowStretch(mask, stored, begin, end, put, [&](size_t a, size_t b) {
+    while (a < b) {
+      const uint8_t v = row[a];
+      const size_t e = runEnd(row, a + 1, b, v);
+      put(a, e, v);
+      a = e;
+    }
+  });
   if (end < width) runs.push_back(static_cast<uint32_t>(width - end));
 }
 

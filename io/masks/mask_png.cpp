@@ -26,6 +26,16 @@ struct RowSums {
     s += value * length;
     t += value * (length * (n - offset) - length * (length - 1) / 2);
   }
+  // The bytes [offset, offset + count) of the filtered row, read.
+  void addBytes(uint64_t n, uint64_t offset, const uint8_t* bytes, size_t count) {
+    uint64_t sum = 0, weighted = 0;  // sum of x_k, sum of k x_k
+    for (size_t k = 0; k < count; ++k) {
+      sum += bytes[k];
+      weighted += k * bytes[k];
+    }
+    s += sum;
+    t += (n - offset) * sum - weighted;
+  }
 };
 
 void putBigEndian32(uint8_t* p, uint32_t v) {
@@ -102,11 +112,15 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
       adlerA = (adlerA + sums.s) % kAdlerModulus;
       continue;
     }
-    size_t litBegin = 0, litEnd = width;
+    // The row's non-zero pixels lie in [litBegin, litEnd): from the extents, else from a scan for the
+    // first one (the rest of the row is then read as it is coded).
+    size_t litBegin = width, litEnd = width;
     if (extents) {
       litBegin = mask.litBegin[stored];
       litEnd = mask.litEnd[stored];
       if (litBegin >= litEnd) litBegin = litEnd = width;
+    } else {
+      litBegin = runEnd(row, 0, width, 0);
     }
     const bool sameAsPrevious =
         previous != nullptr &&
@@ -115,39 +129,27 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
                  : std::memcmp(row, previous, width) == 0);
     previousBegin = litBegin;
     previousEnd = litEnd;
-    // First position >= p whose byte differs from v, using the extents where they settle it and the
-    // fills (the insides of an anti-aliased layer's lit regions) without reading them.
-    RowRunScanner scanner(mask, stored);
-    auto runFrom = [&](size_t p, uint8_t v) {
-      if (!extents) return runEnd(row, p, width, v);
-      if (p >= litEnd) return v == 0 ? width : p;   // dark to the end
-      if (v == 0 && p < litBegin) return litBegin;  // dark up to the first lit pixel
-      if (row[p] != v) return p;                    // a run of one (most edge pixels of anti-aliased rows)
-      const size_t e = scanner.runEnd(p, litEnd, v);
-      return e == litEnd && v == 0 ? width : e;
-    };
     // A dark row is one run of zeros that continues the zeros before it: run matches cost the same
     // number of tokens as row copies, without the row distance's extra bits, so only lit rows are copied.
     if (rowCopies && sameAsPrevious && !previousDark) {
       tokens.putCopy(n, row[width - 1]);
     } else {
       sums = RowSums{};
-      // The filter byte 0 joins a run of zeros at the start of the row.
-      size_t p = sameAsPrevious && previousDark ? width : runFrom(0, 0);
-      previousDark = p == width;
-      uint32_t length = static_cast<uint32_t>(p) + 1;
-      uint8_t value = 0;
-      uint64_t offset = 0;  // of the run in the filtered row
-      for (;;) {
-        sums.addRun(n, offset, length, value);
-        tokens.putBytes(value, length);
-        if (p == width) break;
-        offset = p + 1;
-        value = row[p];
-        const size_t end = runFrom(p + 1, value);
-        length = static_cast<uint32_t>(end - p);
-        p = end;
-      }
+      previousDark = litBegin == width;
+      // The filter byte 0 and the zeros up to the first lit pixel; then the listed stretches of one
+      // value as runs without reading them, and the pixels between them (most of them edge pixels, one
+      // literal each) run by run; then the zeros to the row's end.
+      sums.addRun(n, 0, litBegin + 1, 0);
+      tokens.putBytes(0, litBegin + 1);
+      const auto put = [&](size_t a, size_t b, uint8_t value) {
+        sums.addRun(n, a + 1, b - a, value);
+        tokens.putBytes(value, b - a);
+      };
+      forEachRowStretch(mask, stored, litBegin, litEnd, put, [&](size_t a, size_t b) {
+        sums.addBytes(n, a + 1, row + a, b - a);
+        tokens.putByteString(row + a, b - a);
+      });
+      if (litEnd < width) put(litEnd, width, 0);
     }
     adlerB = (adlerB + n * adlerA + sums.t) % kAdlerModulus;
     adlerA = (adlerA + sums.s) % kAdlerModulus;
