@@ -64,4 +64,26 @@ struct MaskImage {
   }
 };
 
+// Splits [begin, end) of stored row `stored` of `mask` into the row's listed constant stretches
+// (MaskImage::fills, when known) and the stretches between them, left to right: fill(a, b, value) for
+// pixels [a, b) known to hold `value` (not read), gap(a, b) for pixels [a, b) the caller must read.
+// Together they cover [begin, end) exactly, in order; a gap or a fill is never empty.
+template <class Fill, class Gap>
+void forEachRowStretch(const MaskImage& mask, std::size_t stored, std::size_t begin, std::size_t end,
+                       Fill&& fill, Gap&& gap) {
+  std::size_t p = begin;
+  if (mask.hasFills()) {
+    const uint32_t* f = mask.fills.data() + 3 * std::size_t{mask.rowFills[2 * stored]};
+    const uint32_t* const last = f + 3 * std::size_t{mask.rowFills[2 * stored + 1]};
+    for (; f != last && f[0] < end; f += 3) {
+      if (f[1] <= p) continue;
+      const std::size_t a = f[0] > p ? f[0] : p, b = f[1] < end ? f[1] : end;
+      if (p < a) gap(p, a);
+      fill(a, b, static_cast<uint8_t>(f[2]));
+      p = b;
+    }
+  }
+  if (p < end) gap(p, end);
+}
+
 }  // namespace toposlice

@@ -900,7 +900,11 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
 // Stored pixels [a, b) of a row (dark before) set to `value`, and listed in `fills` (when given) as a
 // stretch of one value when it holds kMinFill pixels or more.
 void putStretch(uint8_t* row, uint32_t a, uint32_t b, uint8_t value, std::vector<uint32_t>* fills) {
-  if (fills && b - a >= kMinFill) fills->insert(fills->end(), {a, b, value});
+  if (fills && b - a >= kMinFill) {  // three push_backs: an insert of a list calls memmove twice
+    fills->push_back(a);
+    fills->push_back(b);
+    fills->push_back(value);
+  }
   if (value != 0) std::memset(row + a, value, b - a);
 }
 
@@ -1089,10 +1093,21 @@ void prepareImage(const PixelGrid& grid, MaskImage& out) {
   out.litBegin.resize(height);
   out.litEnd.resize(height);
   const bool runs = reuse && out.hasRuns();  // then only the runs are lit, not the gaps between them
+  // With fills, the dark stretches listed among them (between the parts of a layer, inside a hollow
+  // one) are dark already.
+  const bool fills = reuse && !runs && out.hasFills();
   for (uint32_t r = 0; r < height; ++r) {
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     if (runs) {
       clearRowRuns(row, out.runs, out.rowRuns, r);
+    } else if (fills && out.litBegin[r] < out.litEnd[r]) {
+      const auto clear = [row](std::size_t a, std::size_t b) { std::memset(row + a, 0, b - a); };
+      forEachRowStretch(
+          out, r, out.litBegin[r], out.litEnd[r],
+          [&](std::size_t a, std::size_t b, uint8_t value) {
+            if (value != 0) clear(a, b);
+          },
+          clear);
     } else if (reuse && out.litBegin[r] < out.litEnd[r]) {
       std::memset(row + out.litBegin[r], 0, out.litEnd[r] - out.litBegin[r]);
     }

@@ -120,26 +120,4 @@ class RunAdler32 {
 // First position >= p in row[0..end) whose byte differs from v, scanned 8 bytes at a time.
 size_t runEnd(const uint8_t* row, size_t p, size_t end, uint8_t v);
 
-// Splits [begin, end) of stored row `stored` of `mask` into the row's listed constant stretches
-// (MaskImage::fills, when known) and the stretches between them, left to right: fill(a, b, value) for
-// pixels [a, b) known to hold `value` (not read), gap(a, b) for pixels [a, b) the caller must read.
-// Together they cover [begin, end) exactly, in order; a gap or a fill is never empty.
-template <class Fill, class Gap>
-void forEachRowStretch(const MaskImage& mask, size_t stored, size_t begin, size_t end, Fill&& fill,
-                       Gap&& gap) {
-  size_t p = begin;
-  if (mask.hasFills()) {
-    const uint32_t* f = mask.fills.data() + 3 * size_t{mask.rowFills[2 * stored]};
-    const uint32_t* const last = f + 3 * size_t{mask.rowFills[2 * stored + 1]};
-    for (; f != last && f[0] < end; f += 3) {
-      if (f[1] <= p) continue;
-      const size_t a = f[0] > p ? f[0] : p, b = f[1] < end ? f[1] : end;
-      if (p < a) gap(p, a);
-      fill(a, b, static_cast<uint8_t>(f[2]));
-      p = b;
-    }
-  }
-  if (p < end) gap(p, end);
-}
-
 }  // namespace toposlice
