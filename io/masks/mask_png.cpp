@@ -138,7 +138,7 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
       previousDark = litBegin == width;
       // The filter byte 0 and the zeros up to the first lit pixel; then the listed stretches of one
       // value as runs without reading them, and the pixels between them (most of them edge pixels, one
-      // literal each) run by run; then the zeros to the row's end.
+      // literal each) read as a byte string; then the zeros to the row's end.
       sums.addRun(n, 0, litBegin + 1, 0);
       tokens.putBytes(0, litBegin + 1);
       const auto put = [&](size_t a, size_t b, uint8_t value) {
