@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -1208,6 +1209,67 @@ std::vector<uint8_t> pngOf(const MaskImage& m) {
   std::vector<uint8_t> png;
   encodeMaskPng(m, png);
   return png;
+}
+
+TEST(MaskImageRows, StretchesCoverTheRangeInOrder) {
+  // forEachRowStretch over random fills (some before, across or after the range, some touching) and
+  // random ranges: fills and gaps alternate as they lie, none empty, together exactly the range; a fill
+  // is reported where it lies inside the range, with its value; without fills, one gap.
+  std::mt19937 rng(31);  // 32-bit results
+  for (int trial = 0; trial < 2000; ++trial) {
+    MaskImage m;
+    m.width = 1 + static_cast<uint32_t>(rng() % 80);
+    m.height = 3;
+    m.pixels.assign(std::size_t{m.width} * m.height, 0);
+    m.litBegin.assign(m.height, 0);
+    m.litEnd.assign(m.height, m.width);
+    const bool withFills = trial % 5 != 0;
+    std::vector<std::array<uint32_t, 3>> listed;  // of row 1
+    if (withFills) {
+      m.rowFills.assign(2 * std::size_t{m.height}, 0);
+      for (uint32_t r = 0; r < m.height; ++r) {
+        m.rowFills[2 * r] = static_cast<uint32_t>(m.fills.size() / 3);
+        for (uint32_t x = rng() % 4; x < m.width;) {
+          const uint32_t end = std::min(m.width, x + 1 + static_cast<uint32_t>(rng() % 12));
+          const uint32_t value = rng() % 3 == 0 ? 0 : static_cast<uint32_t>(rng() % 256);
+          m.fills.insert(m.fills.end(), {x, end, value});
+          if (r == 1) listed.push_back({x, end, value});
+          x = end + static_cast<uint32_t>(rng() % 3);  // touching, or a gap of one or two
+        }
+        m.rowFills[2 * r + 1] = static_cast<uint32_t>(m.fills.size() / 3) - m.rowFills[2 * r];
+      }
+      ASSERT_TRUE(m.hasFills());
+    }
+    const std::size_t begin = rng() % (m.width + 1), end = begin + rng() % (m.width + 1 - begin);
+    std::vector<std::array<std::size_t, 4>> seen;  // begin, end, kind (0 gap, 1 fill), value
+    forEachRowStretch(
+        m, 1, begin, end,
+        [&](std::size_t a, std::size_t b, uint8_t value) {
+          seen.push_back({a, b, 1, value});
+        },
+        [&](std::size_t a, std::size_t b) {
+          seen.push_back({a, b, 0, 0});
+        });
+    std::size_t at = begin;
+    for (const auto& [a, b, kind, value] : seen) {
+      ASSERT_EQ(a, at) << "trial " << trial;
+      ASSERT_LT(a, b) << "trial " << trial;
+      at = b;
+      if (kind == 1) {
+        const auto f = std::find_if(listed.begin(), listed.end(),
+                                    [&](const std::array<uint32_t, 3>& g) { return g[0] <= a && b <= g[1]; });
+        ASSERT_NE(f, listed.end()) << "trial " << trial << ": a fill where none is listed";
+        EXPECT_EQ(value, (*f)[2]) << "trial " << trial;
+        EXPECT_TRUE(a == std::max<std::size_t>((*f)[0], begin) && b == std::min<std::size_t>((*f)[1], end));
+      } else {  // no listed fill meets a gap
+        for (const auto& g : listed) ASSERT_TRUE(g[1] <= a || g[0] >= b) << "trial " << trial;
+      }
+    }
+    ASSERT_EQ(at, end) << "trial " << trial;
+    if (!withFills) {
+      EXPECT_LE(seen.size(), 1u);
+    }
+  }
 }
 
 TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {

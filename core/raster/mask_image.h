@@ -67,10 +67,11 @@ struct MaskImage {
 // Splits [begin, end) of stored row `stored` of `mask` into the row's listed constant stretches
 // (MaskImage::fills, when known) and the stretches between them, left to right: fill(a, b, value) for
 // pixels [a, b) known to hold `value` (not read), gap(a, b) for pixels [a, b) the caller must read.
-// Together they cover [begin, end) exactly, in order; a gap or a fill is never empty.
+// Together they cover [begin, end) exactly, in order (nothing when it is empty); none is empty.
 template <class Fill, class Gap>
 void forEachRowStretch(const MaskImage& mask, std::size_t stored, std::size_t begin, std::size_t end,
                        Fill&& fill, Gap&& gap) {
+  if (begin >= end) return;
   std::size_t p = begin;
   if (mask.hasFills()) {
     const uint32_t* f = mask.fills.data() + 3 * std::size_t{mask.rowFills[2 * stored]};
