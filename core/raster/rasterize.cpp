@@ -1093,14 +1093,13 @@ void prepareImage(const PixelGrid& grid, MaskImage& out) {
   out.litBegin.resize(height);
   out.litEnd.resize(height);
   const bool runs = reuse && out.hasRuns();  // then only the runs are lit, not the gaps between them
-  // With fills, the dark stretches listed among them (between the parts of a layer, inside a hollow
-  // one) are dark already.
-  const bool fills = reuse && !runs && out.hasFills();
   for (uint32_t r = 0; r < height; ++r) {
     uint8_t* row = out.pixels.data() + static_cast<std::size_t>(r) * width;
     if (runs) {
       clearRowRuns(row, out.runs, out.rowRuns, r);
-    } else if (fills && out.litBegin[r] < out.litEnd[r]) {
+    } else if (reuse) {
+      // The lit extent, less the dark stretches among the fills (between the parts of a layer, inside
+      // a hollow one), which are dark already.
       const auto clear = [row](std::size_t a, std::size_t b) { std::memset(row + a, 0, b - a); };
       forEachRowStretch(
           out, r, out.litBegin[r], out.litEnd[r],
@@ -1108,8 +1107,6 @@ void prepareImage(const PixelGrid& grid, MaskImage& out) {
             if (value != 0) clear(a, b);
           },
           clear);
-    } else if (reuse && out.litBegin[r] < out.litEnd[r]) {
-      std::memset(row + out.litBegin[r], 0, out.litEnd[r] - out.litBegin[r]);
     }
     out.litBegin[r] = width;
     out.litEnd[r] = 0;

@@ -402,8 +402,8 @@ RunDeflater::RunDeflater(DeflateScratch& scratch, uint32_t copyDistance)
 
 RunDeflater::~RunDeflater() = default;
 
-void RunDeflater::grow() {
-  tokens_.resize(std::max<size_t>(4096, 2 * size_));
+void RunDeflater::grow(size_t more) {
+  tokens_.resize(std::max({size_t{4096}, 2 * tokens_.size(), size_ + more}));
 }
 
 // q matches of 258 bytes of `kind` (kRunMatch, kRowMatch), as repeat tokens.
@@ -462,8 +462,7 @@ void RunDeflater::putByteString(const uint8_t* bytes, size_t count) {
     }
     if (pending_ != 0) flush();
     // Literals up to the first byte that repeats the one before it (no run pending among them).
-    if (size_ + (count - i) > tokens_.size())
-      tokens_.resize(std::max(2 * tokens_.size(), size_ + (count - i)));
+    if (size_ + (count - i) > tokens_.size()) grow(count - i);
     uint16_t* const out = tokens_.data() + size_;
     size_t k = 0;
     uint8_t last = v;

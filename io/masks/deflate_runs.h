@@ -73,11 +73,11 @@ class RunDeflater {
 
  private:
   struct Plan;
-  void grow();  // the token buffer, doubled
+  void grow(size_t more);  // the token buffer, to hold `more` tokens beyond size_ (at least doubled)
   // Into the buffer, grown as needed; counts are the caller's.
   void append(uint32_t token) {
     if (size_ == tokens_.size()) [[unlikely]]
-      grow();
+      grow(1);
     tokens_[size_++] = static_cast<uint16_t>(token);
   }
   // A literal or one match, counted.

@@ -70,6 +70,11 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
   RunDeflater tokens(scratch, rowDistance);
   uint64_t adlerA = 1, adlerB = 0;
   RowSums sums;
+  // `length` bytes of `value` at `offset` in the filtered row.
+  const auto put = [&](uint64_t offset, uint64_t length, uint8_t value) {
+    sums.addRun(n, offset, length, value);
+    tokens.putBytes(value, length);
+  };
   const uint8_t* previous = nullptr;
   bool previousDark = false;  // the row above is all zeros
   // With known extents (mask_image.h) dark pixels are never read: rows compare on their lit spans and
@@ -94,10 +99,6 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
       } else {
         // Zeros (after the filter byte 0) up to the first run, then each run of 255 and the zeros after it.
         sums = RowSums{};
-        const auto put = [&](uint64_t offset, uint64_t length, uint8_t value) {
-          sums.addRun(n, offset, length, value);
-          tokens.putBytes(value, static_cast<uint32_t>(length));
-        };
         size_t p = rowRuns.empty() ? width : rowRuns[0];
         put(0, p + 1, 0);
         for (size_t k = 0; k < rowRuns.size(); k += 2) {
@@ -139,17 +140,15 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
       // The filter byte 0 and the zeros up to the first lit pixel; then the listed stretches of one
       // value as runs without reading them, and the pixels between them (most of them edge pixels, one
       // literal each) read as a byte string; then the zeros to the row's end.
-      sums.addRun(n, 0, litBegin + 1, 0);
-      tokens.putBytes(0, litBegin + 1);
-      const auto put = [&](size_t a, size_t b, uint8_t value) {
-        sums.addRun(n, a + 1, b - a, value);
-        tokens.putBytes(value, b - a);
-      };
-      forEachRowStretch(mask, stored, litBegin, litEnd, put, [&](size_t a, size_t b) {
-        sums.addBytes(n, a + 1, row + a, b - a);
-        tokens.putByteString(row + a, b - a);
-      });
-      if (litEnd < width) put(litEnd, width, 0);
+      put(0, litBegin + 1, 0);
+      forEachRowStretch(
+          mask, stored, litBegin, litEnd,
+          [&](size_t a, size_t b, uint8_t value) { put(a + 1, b - a, value); },
+          [&](size_t a, size_t b) {
+            sums.addBytes(n, a + 1, row + a, b - a);
+            tokens.putByteString(row + a, b - a);
+          });
+      if (litEnd < width) put(litEnd + 1, width - litEnd, 0);
     }
     adlerB = (adlerB + n * adlerA + sums.t) % kAdlerModulus;
     adlerA = (adlerA + sums.s) % kAdlerModulus;
