@@ -20,6 +20,7 @@
 #include <OpenEXR/ImfIntAttribute.h>
 #include <OpenEXR/openexr.h>
 
+#include "core/prefetch.h"
 #include "io/errors.h"
 #include "io/masks/deflate_runs.h"
 
@@ -47,9 +48,13 @@ const HalfBytes& halfBytes() {
 
 // Pixel runs of stored row `stored`, left to right, as value << 24 | length (length < 2^24), appended
 // to `runs`. With extents, dark pixels are not read; with fills, the insides of lit regions are not.
-void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& runs) {
+// Each stretch read asks for the same pixels of stored row `ahead` (read a few rows later): edges move
+// little from row to row, and the rasterizer wrote them a whole layer before, a row apart in a large
+// image.
+void appendRowRuns(const MaskImage& mask, size_t stored, size_t ahead, std::vector<uint32_t>& runs) {
   const size_t width = mask.width;
   const uint8_t* row = mask.pixels.data() + stored * width;
+  const uint8_t* aheadRow = mask.pixels.data() + ahead * width;
   size_t begin = 0, end = width;
   if (mask.hasExtents()) {
     begin = mask.litBegin[stored];
@@ -69,6 +74,7 @@ void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& 
   };
   // The fills of an anti-aliased layer are not read.
   forEachRowStretch(mask, stored, begin, end, put, [&](size_t a, size_t b) {
+    prefetch(aheadRow + a);
     while (a < b) {
       const uint8_t v = row[a];
       const size_t e = runEnd(row, a + 1, b, v);
@@ -78,6 +84,9 @@ void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& 
   });
   if (end < width) runs.push_back(static_cast<uint32_t>(width - end));
 }
+
+// Rows ahead of the one read whose pixels appendRowRuns asks for.
+constexpr size_t kRowsAhead = 3;
 
 // OpenEXR's ZIP chunk of file rows [y0, y0 + lines) (file row y is stored row height-1-y): the raw
 // block is the rows' halves, little-endian; its bytes are split (even bytes, the low bytes of all
@@ -95,7 +104,7 @@ uint32_t tokenizeZipChunk(const MaskImage& mask, uint32_t y0, uint32_t lines, bo
   for (uint32_t i = 0; i < lines; ++i) {
     const size_t stored = height - 1 - (y0 + i);
     lineStart[i] = runs.size();
-    appendRowRuns(mask, stored, runs);
+    appendRowRuns(mask, stored, stored >= kRowsAhead ? stored - kRowsAhead : stored, runs);
     // Runs are maximal, so two lines are equal exactly when their run lists are.
     sameAsAbove[i] =
         i > 0 && std::equal(runs.begin() + static_cast<std::ptrdiff_t>(lineStart[i - 1]),

@@ -11,6 +11,7 @@
 #include <libdeflate.h>
 #include <spng.h>
 
+#include "core/prefetch.h"
 #include "io/errors.h"
 
 namespace toposlice {
@@ -84,6 +85,7 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
   // pixels are not even read.
   const bool runs = mask.hasRuns();
   size_t previousBegin = 0, previousEnd = width;
+  constexpr size_t kRowsAhead = 3;  // rows whose pixels to read are prefetched before coding this one
   std::span<const uint32_t> previousRuns;
   for (size_t r = 0; r < height; ++r) {
     const size_t stored = height - 1 - r;
@@ -141,10 +143,14 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
       // value as runs without reading them, and the pixels between them (most of them edge pixels, one
       // literal each) read as a byte string; then the zeros to the row's end.
       put(0, litBegin + 1, 0);
+      // Each stretch read asks for the same pixels kRowsAhead rows on: edges move little from row to
+      // row, and the rasterizer wrote them a whole layer before, a row apart in a large image.
+      const uint8_t* ahead = r + kRowsAhead < height ? row - kRowsAhead * width : row;
       forEachRowStretch(
           mask, stored, litBegin, litEnd,
           [&](size_t a, size_t b, uint8_t value) { put(a + 1, b - a, value); },
           [&](size_t a, size_t b) {
+            prefetch(ahead + a);
             sums.addBytes(n, a + 1, row + a, b - a);
             tokens.putByteString(row + a, b - a);
           });
