@@ -1272,6 +1272,81 @@ TEST(MaskImageRows, StretchesCoverTheRangeInOrder) {
   }
 }
 
+TEST(RasterCoverage, ConsecutiveLayersInOneImageEqualFreshImages) {
+  // An anti-aliased layer drawn into the image that holds the previous layer (only that layer's lit
+  // stretches are cleared, its dark fills skipped). Slowly moving shapes with a hole and a second part
+  // that comes and goes (dark stretches between parts), whole layers empty, mirrored and portrait grids,
+  // with a gamma table, a light map or a row hook, and a binary layer or a grid of another size in
+  // between: every image equals the same layer drawn into a fresh image, with the same extents, fills
+  // and value sum.
+  RasterScratch scratch;
+  MaskImage m;
+  const std::array<uint8_t, 256> gamma = gammaTable(0.8);
+  std::size_t keptFills = 0;  // lit fills overlapping a lit fill of the same value in the layer below
+  MaskImage previous;
+  for (int k = 0; k < 160; ++k) {
+    const double t = 0.011 * k;
+    std::vector<Loop> loops = {circle(3.0 + t, 3.1, 2.2 - 0.4 * t, 150), reversed(circle(3.1, 3.0, 0.7, 50))};
+    if (k % 9 < 6) loops.push_back(rect(0.3 + 0.01 * k, 4.2, 5.9, 5.8 - 0.005 * k));  // comes and goes
+    const LayerContours layer = makeLayer(k % 19 == 18 ? std::vector<Loop>{} : loops);
+    const std::vector<ContourSet> sets = {{&layer, 1}};
+    PixelGrid grid = makeGrid(0.05, -0.03, 0.05, 126, 121);
+    grid.transposed = k / 40 == 2;
+    grid.mirrorX = k / 20 % 2 == 1;
+    grid.mirrorY = k / 30 % 2 == 1;
+    MaskImage lightImage;  // a light map of stretches, some of them dark
+    lightImage.width = grid.width;
+    lightImage.height = grid.height;
+    lightImage.pixels.resize(std::size_t{grid.width} * grid.height);
+    for (std::size_t p = 0; p < lightImage.pixels.size(); ++p) {
+      const std::size_t x = p % grid.width, y = p / grid.width;
+      lightImage.pixels[p] = static_cast<uint8_t>((x / 17 + y / 5) % 7 == 0 ? 0 : 170 + x / 3);
+    }
+    const LightMap map = lightMapOf(lightImage);
+    CoverageTransfer transfer;
+    transfer.table = k % 4 == 1 ? gamma.data() : nullptr;
+    transfer.lightMap = k % 4 == 2 ? &map : nullptr;
+    if (k % 4 == 3 && k % 3 == 0) {
+      transfer.row = [](void*, uint32_t, uint32_t begin, uint32_t end, uint8_t* row) {
+        for (uint32_t i = begin; i < end; ++i) row[i] = static_cast<uint8_t>(row[i] > 200 ? 0 : row[i]);
+      };
+    }
+    if (k % 29 == 28) {  // something else in between: a binary layer, then a grid of another size
+      rasterizeBinary(sets, grid, m, scratch);
+      rasterizeCoverage(sets, makeGrid(0, 0, 0.2, 33, 31), m, scratch);
+      previous = MaskImage{};
+      continue;
+    }
+    uint64_t sum = 0, freshSum = 0;
+    rasterizeCoverage(sets, grid, m, scratch, &sum, &transfer);
+    MaskImage fresh;
+    RasterScratch freshScratch;
+    rasterizeCoverage(sets, grid, fresh, freshScratch, &freshSum, &transfer);
+    ASSERT_EQ(m.pixels, fresh.pixels) << "layer " << k;
+    ASSERT_EQ(m.litBegin, fresh.litBegin) << "layer " << k;
+    ASSERT_EQ(m.litEnd, fresh.litEnd) << "layer " << k;
+    ASSERT_EQ(m.fills, fresh.fills) << "layer " << k;
+    ASSERT_EQ(m.rowFills, fresh.rowFills) << "layer " << k;
+    ASSERT_EQ(sum, freshSum) << "layer " << k;
+    if (previous.hasFills() && m.hasFills()) {
+      for (uint32_t r = 0; r < grid.height; ++r) {
+        for (uint32_t f = m.rowFills[2 * r]; f < m.rowFills[2 * r] + m.rowFills[2 * r + 1]; ++f) {
+          for (uint32_t g = previous.rowFills[2 * r];
+               g < previous.rowFills[2 * r] + previous.rowFills[2 * r + 1]; ++g) {
+            keptFills += m.fills[3 * f + 2] != 0 && m.fills[3 * f + 2] == previous.fills[3 * g + 2] &&
+                                 m.fills[3 * f] < previous.fills[3 * g + 1] &&
+                                 previous.fills[3 * g] < m.fills[3 * f + 1]
+                             ? 1
+                             : 0;
+          }
+        }
+      }
+    }
+    previous = m;
+  }
+  EXPECT_GT(keptFills, 1000u);  // consecutive layers overlap: the fixture moves slowly
+}
+
 TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {
   // Anti-aliased images of wiggly outlines and random loops, mirrored or not, reused from layer to
   // layer, with a gamma table or a light map: their fills hold what the pixels hold, and the PNG and EXR
