@@ -897,19 +897,24 @@ bool coverRowByClusters(const CoverageEdge* edges, std::span<const ActiveKey> ac
   return false;
 }
 
+// Where a row's fills are written as they are found: three entries each (MaskImage::fills), at most
+// one per kMinFill pixels of the row, so a buffer of rowFillCapacity(width) entries holds any row.
+// Plain stores: GCC 12 keeps std::vector's push_back and resize out of line here.
+struct FillSink {
+  uint32_t* at;
+};
+std::size_t rowFillCapacity(uint32_t width) {
+  return 3 * (std::size_t{width} / kMinFill + 1);
+}
+
 // Stored pixels [a, b) of a row (dark before) set to `value`, and listed in `fills` (when given) as a
 // stretch of one value when it holds kMinFill pixels or more.
-void putStretch(uint8_t* row, uint32_t a, uint32_t b, uint8_t value, std::vector<uint32_t>* fills) {
+void putStretch(uint8_t* row, uint32_t a, uint32_t b, uint8_t value, FillSink* fills) {
   if (fills && b - a >= kMinFill) {
-    // Three stores behind one capacity check: GCC 12 calls push_back out of line here (2 % of a 16K
-    // run), and an insert of a list calls memmove twice.
-    const std::size_t n = fills->size();
-    if (n + 3 > fills->capacity()) fills->reserve(2 * n + 48);
-    fills->resize(n + 3);
-    uint32_t* f = fills->data() + n;
-    f[0] = a;
-    f[1] = b;
-    f[2] = value;
+    fills->at[0] = a;
+    fills->at[1] = b;
+    fills->at[2] = value;
+    fills->at += 3;
   }
   if (value != 0) std::memset(row + a, value, b - a);
 }
@@ -918,8 +923,7 @@ void putStretch(uint8_t* row, uint32_t a, uint32_t b, uint8_t value, std::vector
 // the map, in the order of the pass over the row: backwards when the row is mirrored (the row's fills
 // are reversed after it). Kept out of line: the row loop is hot and this runs only with a light map.
 [[gnu::noinline]] void dimByStretches(const LightMap& light, uint32_t r, uint32_t at, uint32_t end,
-                                      uint8_t value, bool mirrored, std::vector<uint32_t>* fills,
-                                      uint8_t* row) {
+                                      uint8_t value, bool mirrored, FillSink* fills, uint8_t* row) {
   const uint8_t* map = light.pixels.data() + static_cast<std::size_t>(r) * light.width;
   const uint32_t* first = light.starts.data() + light.rowFirst[r];
   const uint32_t* last = light.starts.data() + light.rowFirst[r + 1];
@@ -1236,7 +1240,10 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   // may change the values after they are written.
   const LightMap* light = transfer ? transfer->lightMap : nullptr;
   const bool keepFills = !(transfer && transfer->row);
-  if (keepFills) out.rowFills.assign(std::size_t{2} * height, 0);
+  if (keepFills) {
+    out.rowFills.assign(std::size_t{2} * height, 0);
+    scratch.rowFills.resize(rowFillCapacity(width));
+  }
   for (uint32_t j = 0; j < height; ++j) {
     std::size_t kept = 0;
     for (std::size_t i = 0; i < active.size(); ++i)
@@ -1276,8 +1283,9 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
         lightRow && j + 1 < height ? (grid.mirrorY ? lightRow - width : lightRow + width) : nullptr;
     uint32_t lo = width, hi = 0;  // lit extent, unmirrored
     uint64_t sum = 0;
-    const std::size_t firstFill = out.fills.size();
-    std::vector<uint32_t>* fills = keepFills ? &out.fills : nullptr;  // in the pass's order: reversed below
+    uint32_t* const rowFills = scratch.rowFills.data();
+    FillSink sink{rowFills};
+    FillSink* fills = keepFills ? &sink : nullptr;  // in the pass's order: reversed below
     // The unmirrored pixels [from, to) at one value before the light map.
     const auto fill = [&](uint32_t from, uint32_t to, uint8_t value) {
       if (from >= to) return;
@@ -1321,15 +1329,16 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       next = std::min(end + 1, width);
     }
     fill(next, width, valueOf(covered));
-    if (keepFills && out.fills.size() > firstFill) {
+    if (keepFills && sink.at != rowFills) {
+      const auto count = static_cast<std::size_t>(sink.at - rowFills);
+      assert(count <= scratch.rowFills.size());
       if (grid.mirrorX) {
-        for (std::size_t a = firstFill, b = out.fills.size() - 3; a < b; a += 3, b -= 3)
-          std::swap_ranges(out.fills.begin() + static_cast<std::ptrdiff_t>(a),
-                           out.fills.begin() + static_cast<std::ptrdiff_t>(a + 3),
-                           out.fills.begin() + static_cast<std::ptrdiff_t>(b));
+        for (std::size_t a = 0, b = count - 3; a < b; a += 3, b -= 3)
+          std::swap_ranges(rowFills + a, rowFills + a + 3, rowFills + b);
       }
-      out.rowFills[2 * r] = static_cast<uint32_t>(firstFill / 3);
-      out.rowFills[2 * r + 1] = static_cast<uint32_t>((out.fills.size() - firstFill) / 3);
+      out.rowFills[2 * r] = static_cast<uint32_t>(out.fills.size() / 3);
+      out.rowFills[2 * r + 1] = static_cast<uint32_t>(count / 3);
+      out.fills.insert(out.fills.end(), rowFills, sink.at);
     }
     if (lo >= hi) continue;
     uint32_t begin = grid.mirrorX ? width - hi : lo, end = grid.mirrorX ? width - lo : hi;

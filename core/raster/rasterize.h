@@ -199,6 +199,7 @@ struct RasterScratch {
   std::vector<double> smallCuts;      // where a small cluster's parts are cut (coverSmallCluster)
   std::vector<double> cells;          // area/cover accumulation of the row (width + 2)
   std::vector<CellSpan> spans;        // cell ranges touched in the row
+  std::vector<uint32_t> rowFills;     // the row's fills as they are found (coverage)
   // Tests only: every row of rasterizeCoverage by the banded path (coverRow), none by the clusters.
   bool alwaysBanded = false;
   // Rows of rasterizeCoverage done by clusters alone (of them, rows with a cluster that is not one
