@@ -538,6 +538,25 @@ TEST(RasterBinary, RunsOfMirroredAndPortraitGridsDescribeTheirPixels) {
   EXPECT_GT(multiRunRows, 500u);
 }
 
+// Layer k of a slowly changing stack, for the tests of layers drawn into the previous layer's image: a
+// disc drifting in x and shrinking, with a hole, and a bar that comes and goes (turned round, a hole
+// alone, from layer 56 on); every 17th layer empty.
+LayerContours driftingLayer(int k) {
+  const double t = 0.013 * k;
+  std::vector<Loop> loops = {circle(3.0 + t, 3.1, 1.9 - 0.5 * t, 120), reversed(circle(3.1, 3.0, 0.6, 40))};
+  if (k % 9 < 5) loops.push_back(rect(0.4, 4.6 + 0.02 * k, 2.2 + t, 5.7));
+  return makeLayer(k % 17 == 16 ? std::vector<Loop>{} : loops);
+}
+
+// The grid of layer k of that stack: portrait for layers 40-79, mirrored in x and in y by stretches.
+PixelGrid driftingGrid(int k, double pixel, uint32_t width, uint32_t height) {
+  PixelGrid grid = makeGrid(0.05, -0.03, pixel, width, height);
+  grid.transposed = k / 40 == 1;
+  grid.mirrorX = k / 20 % 2 == 1;
+  grid.mirrorY = k / 30 % 2 == 1;
+  return grid;
+}
+
 TEST(RasterBinary, ConsecutiveLayersInOneImageEqualFreshImages) {
   // A binary mask rasterized into the image that holds the previous layer's mask rewrites only the rows
   // whose runs changed. Slowly moving shapes (most rows repeat, some change, some go dark, whole layers
@@ -549,15 +568,9 @@ TEST(RasterBinary, ConsecutiveLayersInOneImageEqualFreshImages) {
   std::size_t repeatedRows = 0, changedRows = 0;
   MaskImage previous;  // the last binary mask, for counting repeated rows
   for (int k = 0; k < 120; ++k) {
-    const double t = 0.013 * k;
-    std::vector<Loop> loops = {circle(3.0 + t, 3.1, 1.9 - 0.5 * t, 120), reversed(circle(3.1, 3.0, 0.6, 40))};
-    if (k % 9 < 5) loops.push_back(rect(0.4, 4.6 + 0.02 * k, 2.2 + t, 5.7));  // comes and goes
-    const LayerContours layer = makeLayer(k % 17 == 16 ? std::vector<Loop>{} : loops);
+    const LayerContours layer = driftingLayer(k);
     const std::vector<ContourSet> sets = {{&layer, 1}};
-    PixelGrid grid = makeGrid(0.05, -0.03, 0.1, 66, 62);
-    grid.transposed = k / 40 == 1;
-    grid.mirrorX = k / 20 % 2 == 1;
-    grid.mirrorY = k / 30 % 2 == 1;
+    const PixelGrid grid = driftingGrid(k, 0.1, 66, 62);
     if (k % 23 == 22) {  // something else in between: coverage, then a smaller grid
       MaskImage fresh;
       rasterizeCoverage(sets, grid, m, scratch);
@@ -1284,16 +1297,10 @@ TEST(RasterCoverage, ConsecutiveLayersInOneImageEqualFreshImages) {
   const std::array<uint8_t, 256> gamma = gammaTable(0.8);
   std::size_t keptFills = 0;  // lit fills overlapping a lit fill of the same value in the layer below
   MaskImage previous;
-  for (int k = 0; k < 160; ++k) {
-    const double t = 0.011 * k;
-    std::vector<Loop> loops = {circle(3.0 + t, 3.1, 2.2 - 0.4 * t, 150), reversed(circle(3.1, 3.0, 0.7, 50))};
-    if (k % 9 < 6) loops.push_back(rect(0.3 + 0.01 * k, 4.2, 5.9, 5.8 - 0.005 * k));  // comes and goes
-    const LayerContours layer = makeLayer(k % 19 == 18 ? std::vector<Loop>{} : loops);
+  for (int k = 0; k < 120; ++k) {
+    const LayerContours layer = driftingLayer(k);
     const std::vector<ContourSet> sets = {{&layer, 1}};
-    PixelGrid grid = makeGrid(0.05, -0.03, 0.05, 126, 121);
-    grid.transposed = k / 40 == 2;
-    grid.mirrorX = k / 20 % 2 == 1;
-    grid.mirrorY = k / 30 % 2 == 1;
+    const PixelGrid grid = driftingGrid(k, 0.05, 126, 121);
     MaskImage lightImage;  // a light map of stretches, some of them dark
     lightImage.width = grid.width;
     lightImage.height = grid.height;
