@@ -251,7 +251,7 @@ void encodeExrMaskLayer(const MaskImage& mask, const MaskJob& job, uint32_t inde
   exr_context_t ctxt = nullptr;
   exr_result_t rc = exr_start_write(&ctxt, name.c_str(), EXR_WRITE_FILE_DIRECTLY, &init);
   int part = 0;
-  const exr_attr_v2f_t origin{static_cast<float>(job.grid.x0), static_cast<float>(job.grid.y0)};
+  const exr_attr_v2f_t origin{{{static_cast<float>(job.grid.x0), static_cast<float>(job.grid.y0)}}};
   // Stops at the first failure (each step after it is skipped).
   auto step = [&rc](auto&& call) {
     if (rc == EXR_ERR_SUCCESS) rc = call();

@@ -20,7 +20,6 @@ constexpr uint8_t kEnding[11] = {0x00, 0x00, 0x00, 0x07, 0x00, 0x00, 0x00, 0x44,
 constexpr uint8_t kLayerMagic = 0x55;
 constexpr std::size_t kLayerDefinitionSize = 2 + 15 * 4 + 2 + 2;  // through the delimiter
 constexpr std::size_t kChunksAt = kLayerDefinitionSize + 4 + 1;   // data size, 0x55
-constexpr std::size_t kLayerTrailerSize = 1 + 2;                  // checksum, delimiter
 
 // Appends big-endian fields to a byte vector.
 class BigEndian {
