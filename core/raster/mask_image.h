@@ -87,4 +87,14 @@ void forEachRowStretch(const MaskImage& mask, std::size_t stored, std::size_t be
   if (p < end) gap(p, end);
 }
 
+// For a coder that goes down the image (stored rows in decreasing order, as PNG and EXR files run) and
+// reads the stretches forEachRowStretch gives it: the pixels of the stored row it reads
+// kCoderRowsAhead rows after `stored` (its own where none is left), where it prefetches the stretches
+// it reads in `stored`. Edges move little from row to row, and the rasterizer wrote those pixels a
+// whole layer before, a row apart in an image that may be larger than the caches.
+constexpr std::size_t kCoderRowsAhead = 3;
+inline const uint8_t* rowAhead(const MaskImage& mask, std::size_t stored) {
+  return mask.pixels.data() + (stored >= kCoderRowsAhead ? stored - kCoderRowsAhead : stored) * mask.width;
+}
+
 }  // namespace toposlice

@@ -48,13 +48,11 @@ const HalfBytes& halfBytes() {
 
 // Pixel runs of stored row `stored`, left to right, as value << 24 | length (length < 2^24), appended
 // to `runs`. With extents, dark pixels are not read; with fills, the insides of lit regions are not.
-// Each stretch read asks for the same pixels of stored row `ahead` (read a few rows later): edges move
-// little from row to row, and the rasterizer wrote them a whole layer before, a row apart in a large
-// image.
-void appendRowRuns(const MaskImage& mask, size_t stored, size_t ahead, std::vector<uint32_t>& runs) {
+// Each stretch read is prefetched in the row read a few rows later (rowAhead).
+void appendRowRuns(const MaskImage& mask, size_t stored, std::vector<uint32_t>& runs) {
   const size_t width = mask.width;
   const uint8_t* row = mask.pixels.data() + stored * width;
-  const uint8_t* aheadRow = mask.pixels.data() + ahead * width;
+  const uint8_t* aheadRow = rowAhead(mask, stored);
   size_t begin = 0, end = width;
   if (mask.hasExtents()) {
     begin = mask.litBegin[stored];
@@ -85,9 +83,6 @@ void appendRowRuns(const MaskImage& mask, size_t stored, size_t ahead, std::vect
   if (end < width) runs.push_back(static_cast<uint32_t>(width - end));
 }
 
-// Rows ahead of the one read whose pixels appendRowRuns asks for.
-constexpr size_t kRowsAhead = 3;
-
 // OpenEXR's ZIP chunk of file rows [y0, y0 + lines) (file row y is stored row height-1-y): the raw
 // block is the rows' halves, little-endian; its bytes are split (even bytes, the low bytes of all
 // pixels, first; then the odd, high bytes), each byte but the first replaced by (byte - previous byte
@@ -104,7 +99,7 @@ uint32_t tokenizeZipChunk(const MaskImage& mask, uint32_t y0, uint32_t lines, bo
   for (uint32_t i = 0; i < lines; ++i) {
     const size_t stored = height - 1 - (y0 + i);
     lineStart[i] = runs.size();
-    appendRowRuns(mask, stored, stored >= kRowsAhead ? stored - kRowsAhead : stored, runs);
+    appendRowRuns(mask, stored, runs);
     // Runs are maximal, so two lines are equal exactly when their run lists are.
     sameAsAbove[i] =
         i > 0 && std::equal(runs.begin() + static_cast<std::ptrdiff_t>(lineStart[i - 1]),

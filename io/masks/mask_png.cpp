@@ -85,7 +85,6 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
   // pixels are not even read.
   const bool runs = mask.hasRuns();
   size_t previousBegin = 0, previousEnd = width;
-  constexpr size_t kRowsAhead = 3;  // rows whose pixels to read are prefetched before coding this one
   std::span<const uint32_t> previousRuns;
   for (size_t r = 0; r < height; ++r) {
     const size_t stored = height - 1 - r;
@@ -143,9 +142,7 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
       // value as runs without reading them, and the pixels between them (most of them edge pixels, one
       // literal each) read as a byte string; then the zeros to the row's end.
       put(0, litBegin + 1, 0);
-      // Each stretch read asks for the same pixels kRowsAhead rows on: edges move little from row to
-      // row, and the rasterizer wrote them a whole layer before, a row apart in a large image.
-      const uint8_t* ahead = r + kRowsAhead < height ? row - kRowsAhead * width : row;
+      const uint8_t* ahead = rowAhead(mask, stored);  // where each stretch read is prefetched
       forEachRowStretch(
           mask, stored, litBegin, litEnd,
           [&](size_t a, size_t b, uint8_t value) { put(a + 1, b - a, value); },
