@@ -9,10 +9,22 @@
 #include <tbb/task_group.h>
 
 #include <atomic>
+#include <cstdint>
 #include <exception>
 #include <optional>
 #include <utility>
 #include <vector>
+
+#if defined(__SANITIZE_THREAD__)
+#define TOPOSLICE_TSAN 1
+#elif defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define TOPOSLICE_TSAN 1
+#endif
+#endif
+#ifdef TOPOSLICE_TSAN
+#include <sanitizer/tsan_interface.h>
+#endif
 
 namespace toposlice {
 
@@ -46,6 +58,35 @@ class SchedulerEdges {
   std::atomic<std::size_t> count_{0};
 };
 
+// A task's last step comes after taskEnds(): oneTBB's header code, compiled into our objects and so seen
+// by TSan, counts down the call's wait context with a release, and the caller's wait acquires it inside
+// libtbb, unseen. parallel_for and parallel_invoke keep that context on the caller's stack. So when the
+// caller later reuses that stack while the worker has gone on to long work that no edge orders before the
+// caller (a BackgroundTask drawing previews), and TSan's history of the worker has lost the countdown,
+// TSan reports a race with "failed to restore the stack", which the libtbb suppression cannot match
+// (tests/tsan_stack_reuse.cpp). acquireReturnedCallStack() repeats the acquire where TSan sees it, on
+// every word of the stack the returned call may have used; TSan looks its sync objects up by address and
+// touches no memory. (A BackgroundTask's context lives in its task group, whose destructor loads it in
+// header code: TSan sees that one.) Other builds get an empty function.
+namespace {
+#ifdef TOPOSLICE_TSAN
+void acquireWords(std::uintptr_t begin, std::uintptr_t end) {
+  for (std::uintptr_t a = begin & ~std::uintptr_t{7}; a < end; a += 8)
+    __tsan_acquire(reinterpret_cast<void*>(a));  // NOLINT(performance-no-int-to-ptr)
+}
+
+// Called right after the parallel call returns: the call's frames lay below this one's, or in the
+// caller's own frame just above it when the compiler inlined oneTBB's entry.
+[[gnu::noinline]] void acquireReturnedCallStack() {
+  constexpr std::uintptr_t kBelow = 16 * 1024, kAbove = 4 * 1024;
+  const auto frame = reinterpret_cast<std::uintptr_t>(__builtin_frame_address(0));
+  acquireWords(frame - kBelow, frame + kAbove);
+}
+#else
+void acquireReturnedCallStack() {}
+#endif
+}  // namespace
+
 void parallelForChunks(std::size_t count, std::size_t grain,
                        const std::function<void(std::size_t, std::size_t)>& body) {
   if (count == 0) return;
@@ -57,6 +98,7 @@ void parallelForChunks(std::size_t count, std::size_t grain,
                       edges.taskEnds();
                     });
   edges.joined();
+  acquireReturnedCallStack();
 }
 
 ChunkRunner parallelChunkRunner() {
@@ -80,6 +122,7 @@ void parallelInvoke(const std::function<void()>& a, const std::function<void()>&
   };
   tbb::parallel_invoke([&] { task(a, errorA); }, [&] { task(b, errorB); });
   edges.joined();
+  acquireReturnedCallStack();
   if (errorA) std::rethrow_exception(errorA);
   if (errorB) std::rethrow_exception(errorB);
 }

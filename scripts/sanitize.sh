@@ -27,10 +27,10 @@ export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 export ASAN_OPTIONS=detect_leaks=1:intercept_tls_get_addr=0
 export TSAN_OPTIONS="halt_on_error=1 second_deadlock_stack=1 suppressions=$(pwd)/scripts/tsan.supp"
 if [ "$mode" = thread ]; then
-  # The parallel engine: split weld, adjacency and STL parse, the streamed and the parallel gzip read,
-  # bands, pipeline, thread-count determinism, Embree queries, batch jobs.
+  # The parallel engine: its scheduler edges, split weld, adjacency and STL parse, the streamed and the
+  # parallel gzip read, bands, pipeline, thread-count determinism, Embree queries, batch jobs.
   ctest --test-dir "$dir" --output-on-failure --parallel "$(nproc)" \
-    -R 'Split(Topology|Stl)|StreamedGzip|ParallelGunzip|BackgroundTask|Sl1Archive.Deferred|SliceAnalytic|SliceModels.*(femur|tibia)|EmbreeQueries.Concurrent|CliTool.*(Determin|Batch)'
+    -R 'TsanStackReuse|Split(Topology|Stl)|StreamedGzip|ParallelGunzip|BackgroundTask|Sl1Archive.Deferred|SliceAnalytic|SliceModels.*(femur|tibia)|EmbreeQueries.Concurrent|CliTool.*(Determin|Batch)'
 else
   ctest --test-dir "$dir" --output-on-failure --parallel "$(nproc)" -E 'CliTool.*Interrupt'
 fi
