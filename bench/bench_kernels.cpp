@@ -17,7 +17,7 @@
 #include "core/slicing/slice_closest.h"
 #include "core/slicing/slice_follow.h"
 #include "core/slicing/slice_march.h"
-#include "io/masks/mask_png.h"
+#include "io/coders/mask_png.h"
 #include "io/readers/byte_input.h"
 #include "io/readers/parallel_gunzip.h"
 #include "io/readers/stl_reader.h"

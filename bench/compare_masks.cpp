@@ -33,7 +33,7 @@
 #include <vector>
 
 #include "core/raster/mask_image.h"
-#include "io/masks/mask_png.h"
+#include "io/coders/mask_png.h"
 
 namespace toposlice {
 namespace {

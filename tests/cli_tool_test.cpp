@@ -32,8 +32,8 @@
 #include <vector>
 
 #include "core/slicing/contours.h"
+#include "io/coders/mask_png.h"
 #include "io/masks/exr_writer.h"
-#include "io/masks/mask_png.h"
 #include "io/readers/stl_writer.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/fixtures/winding.h"

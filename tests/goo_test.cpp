@@ -15,8 +15,8 @@
 #include <string>
 #include <vector>
 
+#include "io/coders/mask_png.h"
 #include "io/masks/goo_writer.h"
-#include "io/masks/mask_png.h"
 #include "io/masks/mask_sink.h"
 #include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"

@@ -21,9 +21,9 @@
 #include <thread>
 #include <vector>
 
+#include "io/coders/mask_png.h"
 #include "io/errors.h"
 #include "io/masks/exr_writer.h"
-#include "io/masks/mask_png.h"
 #include "io/masks/mask_sink.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"

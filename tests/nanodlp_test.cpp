@@ -11,7 +11,7 @@
 
 #include <nlohmann/json.hpp>
 
-#include "io/masks/mask_png.h"
+#include "io/coders/mask_png.h"
 #include "io/masks/nanodlp_writer.h"
 #include "tests/tool_runner.h"
 

@@ -1,7 +1,7 @@
 #include "core/raster/rasterize.h"
 #include "core/print/corrections.h"
+#include "io/coders/mask_png.h"
 #include "io/masks/exr_writer.h"
-#include "io/masks/mask_png.h"
 #include "tests/fixtures/exact_coverage.h"
 
 #include <gtest/gtest.h>

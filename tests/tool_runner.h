@@ -30,7 +30,7 @@
 #include <thread>
 #include <vector>
 
-#include "io/masks/mask_png.h"
+#include "io/coders/mask_png.h"
 
 namespace toposlice::tool_test {
 

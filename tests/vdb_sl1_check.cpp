@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "io/masks/mask_png.h"
+#include "io/coders/mask_png.h"
 #include "io/masks/vdb_writer.h"
 
 namespace {

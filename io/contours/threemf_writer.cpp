@@ -31,9 +31,9 @@
 
 #include "core/mesh/mesh_info.h"
 #include "core/mesh/weld.h"
+#include "io/coders/zip_stream.h"
 #include "io/contours/xml_text.h"
 #include "io/errors.h"
-#include "io/masks/zip_stream.h"
 #include "io/output_file.h"
 #include "io/text_buffer.h"
 

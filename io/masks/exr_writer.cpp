@@ -21,8 +21,8 @@
 #include <OpenEXR/openexr.h>
 
 #include "core/prefetch.h"
+#include "io/coders/deflate_runs.h"
 #include "io/errors.h"
-#include "io/masks/deflate_runs.h"
 
 namespace toposlice {
 namespace {

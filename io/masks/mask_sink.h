@@ -29,7 +29,7 @@
 #include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 #include "core/raster/mask_image.h"
-#include "io/masks/deflate_runs.h"
+#include "io/coders/deflate_runs.h"
 #include "io/staged_directory.h"
 
 namespace toposlice {

@@ -11,9 +11,9 @@
 #include <libdeflate.h>
 #include <nlohmann/json.hpp>
 
+#include "io/coders/mask_png.h"
+#include "io/coders/zip_stream.h"
 #include "io/errors.h"
-#include "io/masks/mask_png.h"
-#include "io/masks/zip_stream.h"
 #include "io/output_file.h"
 #include "io/preview_png.h"
 

@@ -2,8 +2,8 @@
 
 #include <string>
 
+#include "io/coders/mask_png.h"
 #include "io/errors.h"
-#include "io/masks/mask_png.h"
 #include "io/staged_directory.h"
 
 namespace toposlice {

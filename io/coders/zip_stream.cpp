@@ -1,5 +1,5 @@
 // ZipStream (zip_stream.h): minizip, then the Zip64 end records minizip 1.1 leaves out.
-#include "io/masks/zip_stream.h"
+#include "io/coders/zip_stream.h"
 
 #include <algorithm>
 #include <cerrno>

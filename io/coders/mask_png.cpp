@@ -1,6 +1,6 @@
 // PNG encoding for masks (PNG 1.2 spec; zlib stream RFC 1950) on the shared run deflater
 // (deflate_runs.h).
-#include "io/masks/mask_png.h"
+#include "io/coders/mask_png.h"
 
 #include <algorithm>
 #include <cassert>

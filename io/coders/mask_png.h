@@ -18,7 +18,7 @@
 #include <vector>
 
 #include "core/raster/mask_image.h"
-#include "io/masks/deflate_runs.h"
+#include "io/coders/deflate_runs.h"
 
 namespace toposlice {
 

@@ -1,6 +1,6 @@
 // Deflate for run-structured streams (RFC 1951; zlib's Adler-32, RFC 1950): tokens, then one block that
 // codes them with a dynamic Huffman code (3.2.7) or, when that is not smaller, the fixed code (3.2.6).
-#include "io/masks/deflate_runs.h"
+#include "io/coders/deflate_runs.h"
 
 #include <algorithm>
 #include <bit>
