@@ -1295,21 +1295,22 @@ TEST(RasterCoverage, ConsecutiveLayersInOneImageEqualFreshImages) {
   RasterScratch scratch;
   MaskImage m;
   const std::array<uint8_t, 256> gamma = gammaTable(0.8);
+  constexpr uint32_t kWidth = 126, kHeight = 121;  // every layer's grid, portrait or not
+  MaskImage lightImage;                            // a light map of stretches, some of them dark
+  lightImage.width = kWidth;
+  lightImage.height = kHeight;
+  lightImage.pixels.resize(std::size_t{kWidth} * kHeight);
+  for (std::size_t p = 0; p < lightImage.pixels.size(); ++p) {
+    const std::size_t x = p % kWidth, y = p / kWidth;
+    lightImage.pixels[p] = static_cast<uint8_t>((x / 17 + y / 5) % 7 == 0 ? 0 : 170 + x / 3);
+  }
+  const LightMap map = lightMapOf(lightImage);
   std::size_t keptFills = 0;  // lit fills overlapping a lit fill of the same value in the layer below
   MaskImage previous;
   for (int k = 0; k < 120; ++k) {
     const LayerContours layer = driftingLayer(k);
     const std::vector<ContourSet> sets = {{&layer, 1}};
-    const PixelGrid grid = driftingGrid(k, 0.05, 126, 121);
-    MaskImage lightImage;  // a light map of stretches, some of them dark
-    lightImage.width = grid.width;
-    lightImage.height = grid.height;
-    lightImage.pixels.resize(std::size_t{grid.width} * grid.height);
-    for (std::size_t p = 0; p < lightImage.pixels.size(); ++p) {
-      const std::size_t x = p % grid.width, y = p / grid.width;
-      lightImage.pixels[p] = static_cast<uint8_t>((x / 17 + y / 5) % 7 == 0 ? 0 : 170 + x / 3);
-    }
-    const LightMap map = lightMapOf(lightImage);
+    const PixelGrid grid = driftingGrid(k, 0.05, kWidth, kHeight);
     CoverageTransfer transfer;
     transfer.table = k % 4 == 1 ? gamma.data() : nullptr;
     transfer.lightMap = k % 4 == 2 ? &map : nullptr;
