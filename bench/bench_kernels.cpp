@@ -5,6 +5,7 @@
 #include <array>
 #include <cstdlib>
 #include <optional>
+#include <thread>
 
 #include "core/mesh/adjacency.h"
 #include "core/mesh/mesh_info.h"
@@ -106,6 +107,13 @@ void BM_Inflate(benchmark::State& state) {
 }
 BENCHMARK(BM_Inflate)->DenseRange(0, 2)->UseRealTime()->Unit(benchmark::kMillisecond);
 
+// Thread counts 4, 8, 16, ... up to the machine's cores (the fixed arguments above cover 1 and 2), so a
+// bigger machine times the parallel kernels on all of its cores. Second argument as given.
+void everyCoreCount(benchmark::internal::Benchmark* bench, int64_t second) {
+  for (unsigned threads = 4; threads <= std::thread::hardware_concurrency(); threads *= 2)
+    bench->Args({static_cast<int64_t>(threads), second});
+}
+
 // The parallel inflate (parallel_gunzip.h, the read on more than two threads) into a fresh buffer, CRC-32
 // checked: arg 0 threads, arg 1 parts (0: the default, one per thread). On one thread, 1 part against
 // several gives the cost of a part; against BM_Inflate/1, this decoder's speed against libdeflate's.
@@ -130,6 +138,7 @@ BENCHMARK(BM_InflateParallel)
     ->Args({1, 16})
     ->Args({2, 0})
     ->Args({2, 8})
+    ->Apply([](benchmark::internal::Benchmark* bench) { everyCoreCount(bench, 0); })
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond);
 
@@ -164,6 +173,7 @@ BENCHMARK(BM_WeldSplit)
     ->Args({1, 4})
     ->Args({2, 4})
     ->Args({2, 16})
+    ->Apply([](benchmark::internal::Benchmark* bench) { everyCoreCount(bench, 16); })
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
@@ -181,6 +191,7 @@ BENCHMARK(BM_AdjacencySplit)
     ->Args({2, 2})
     ->Args({2, 4})
     ->Args({2, 16})
+    ->Apply([](benchmark::internal::Benchmark* bench) { everyCoreCount(bench, 16); })
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
