@@ -3,6 +3,7 @@
 #include <malloc.h>
 #include <sys/mman.h>
 
+#include <algorithm>
 #include <cstdint>
 
 namespace toposlice {
@@ -14,6 +15,22 @@ void adviseHugePages(void* data, std::size_t bytes) noexcept {
   if (bytes < kHuge || end <= first) return;
   // Advice only: EINVAL where the kernel has no transparent huge pages changes nothing.
   (void)madvise(reinterpret_cast<void*>(first), end - first, MADV_HUGEPAGE);
+}
+
+void prefaultInParallel(void* data, std::size_t bytes, const ChunkRunner& runner) noexcept {
+  constexpr std::uintptr_t kPage = 4096, kPiece = std::uintptr_t{2} << 20;
+  const auto first = reinterpret_cast<std::uintptr_t>(data) & ~(kPage - 1);
+  const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(data) + bytes + kPage - 1) & ~(kPage - 1);
+  if (bytes == 0) return;
+  const std::size_t pieces = (end - first + kPiece - 1) / kPiece;
+  try {
+    runner.run(pieces, 1, [&](std::size_t p0, std::size_t p1) {
+      const std::uintptr_t from = first + p0 * kPiece, to = std::min(end, first + p1 * kPiece);
+      // EINVAL (an older kernel) or ENOMEM leave the pages to be faulted in as they are written.
+      (void)madvise(reinterpret_cast<void*>(from), to - from, MADV_POPULATE_WRITE);
+    });
+  } catch (...) {  // the runner could not start its tasks: the advice is skipped
+  }
 }
 
 void keepFreedMemory() noexcept {

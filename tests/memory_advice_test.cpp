@@ -3,6 +3,9 @@
 #include <gtest/gtest.h>
 #include <sys/mman.h>
 
+#include <unistd.h>
+#include <algorithm>
+#include <cerrno>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -106,6 +109,89 @@ TEST(MemoryAdvice, ReservedVectorsAreAdvisedAndHoldTheirValues) {
   for (std::size_t i = 0; i < big.size(); ++i) big[i] = static_cast<uint32_t>(i * 2654435761u);
   for (std::size_t i = 0; i < big.size(); i += 4097)
     ASSERT_EQ(big[i], static_cast<uint32_t>(i * 2654435761u));
+}
+
+// Which of the 4 KiB pages of [data, data + bytes) are in memory (mincore), as one flag per page.
+std::vector<bool> residentPages(const std::byte* data, std::size_t bytes) {
+  const std::size_t page = static_cast<std::size_t>(sysconf(_SC_PAGESIZE)), pages = (bytes + page - 1) / page;
+  std::vector<unsigned char> flags(pages, 0);
+  EXPECT_EQ(mincore(const_cast<std::byte*>(data), bytes, flags.data()), 0);
+  std::vector<bool> resident(pages);
+  for (std::size_t i = 0; i < pages; ++i) resident[i] = (flags[i] & 1) != 0;
+  return resident;
+}
+
+// Whether this kernel prefaults on request (MADV_POPULATE_WRITE, Linux 5.14).
+bool kernelPrefaults() {
+  const FreshMapping probe(4096);
+  return probe.data != MAP_FAILED && madvise(probe.data, 4096, MADV_POPULATE_WRITE) == 0;
+}
+
+// A runner that runs its chunks one index at a time, last first, so that a piece left out or a range
+// taken from the wrong end shows.
+const ChunkRunner& backwardsRunner() {
+  static const ChunkRunner runner{[](std::size_t count, std::size_t, const ChunkBody& body) {
+                                    for (std::size_t i = count; i-- > 0;) body(i, i + 1);
+                                  },
+                                  4};
+  return runner;
+}
+
+// Every page of the span, and only those, is faulted in, whatever its alignment, and what was written
+// there before stays as it was.
+TEST(MemoryAdvice, PrefaultingFaultsInEveryPageOfTheSpanAndKeepsItsContents) {
+  if (!kernelPrefaults()) GTEST_SKIP() << "this kernel has no MADV_POPULATE_WRITE";
+  const FreshMapping map(24 * kHuge);
+  ASSERT_NE(map.data, MAP_FAILED);
+  std::byte* const begin = map.aligned() + 3 * kHuge + 5000;  // inside a page, not at a boundary
+  const std::size_t bytes = 7 * kHuge + 123;
+  begin[0] = std::byte{0x5a};  // already there: must be kept
+  begin[kHuge] = std::byte{0xa5};
+  prefaultInParallel(begin, bytes, backwardsRunner());
+  const std::size_t page = static_cast<std::size_t>(sysconf(_SC_PAGESIZE));
+  std::byte* const firstPage = begin - (reinterpret_cast<std::uintptr_t>(begin) % page);
+  const std::vector<bool> inside =
+      residentPages(firstPage, static_cast<std::size_t>(begin + bytes - firstPage));
+  EXPECT_EQ(std::count(inside.begin(), inside.end(), false), 0) << "of " << inside.size() << " pages";
+  const std::vector<bool> before = residentPages(map.data, static_cast<std::size_t>(firstPage - map.data));
+  EXPECT_EQ(std::count(before.begin(), before.end(), true), 0);
+  std::byte* const after = firstPage + inside.size() * page;
+  const std::vector<bool> rest = residentPages(after, static_cast<std::size_t>(map.data + map.bytes - after));
+  EXPECT_EQ(std::count(rest.begin(), rest.end(), true), 0);
+  EXPECT_EQ(begin[0], std::byte{0x5a});
+  EXPECT_EQ(begin[kHuge], std::byte{0xa5});
+  EXPECT_EQ(begin[1], std::byte{0});
+  EXPECT_EQ(begin[bytes - 1], std::byte{0});
+}
+
+// resizeFaultedIn is resize: the elements already there keep their values, the new ones are zero, on
+// the serial runner and on one that splits the prefault.
+TEST(MemoryAdvice, ResizingFaultedInKeepsTheOldElementsAndZeroesTheNewOnes) {
+  for (const ChunkRunner* runner : {&serialChunkRunner(), &backwardsRunner()}) {
+    std::vector<uint32_t> v = {7, 8, 9};
+    const std::size_t n = (5 * kHuge + 777) / sizeof(uint32_t);
+    resizeFaultedIn(v, n, *runner);
+    ASSERT_EQ(v.size(), n);
+    EXPECT_EQ(v[0], 7u);
+    EXPECT_EQ(v[1], 8u);
+    EXPECT_EQ(v[2], 9u);
+    EXPECT_EQ(std::count(v.begin() + 3, v.end(), 0u), static_cast<std::ptrdiff_t>(n - 3)) << runner->width;
+  }
+}
+
+// uninitializedArray gives n elements, advised where whole 2 MiB pages fit, that hold what is written.
+TEST(MemoryAdvice, UninitializedArraysAreAdvisedAndHoldTheirValues) {
+  const std::size_t n = (9 * kHuge) / sizeof(uint64_t);
+  const std::unique_ptr<uint64_t[]> array = uninitializedArray<uint64_t>(n);
+  ASSERT_NE(array, nullptr);
+  if (kernelHasHugePages()) {
+    const auto begin = reinterpret_cast<std::uintptr_t>(array.get());
+    const auto* const firstWhole =
+        reinterpret_cast<const std::byte*>(array.get()) + (((begin + kHuge - 1) & ~(kHuge - 1)) - begin);
+    EXPECT_TRUE(hugePageAdvised(firstWhole)) << vmFlagsAt(firstWhole);
+  }
+  for (std::size_t i = 0; i < n; ++i) array[i] = i * 0x9E3779B97F4A7C15ull;
+  for (std::size_t i = 0; i < n; i += 1021) ASSERT_EQ(array[i], i * 0x9E3779B97F4A7C15ull);
 }
 
 }  // namespace

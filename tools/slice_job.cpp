@@ -75,8 +75,7 @@ void buildTable(const FacetSoup& soup, std::vector<int32_t>& table, EdgeStats* s
   const IndexedMesh mesh = welded && welded->facetVertices.size() == soup.corners.size()
                                ? std::move(*welded)
                                : weldCorners(soup.corners, runner);
-  reserveHugePages(table, soup.corners.size());
-  table.resize(soup.corners.size());
+  resizeFaultedIn(table, soup.corners.size(), runner);
   const EdgeStats s = buildAdjacency(mesh.facetVertices, mesh.vertices.size(), table, runner);
   if (stats) *stats = s;
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <memory>
 #include <vector>
 
 #include "core/memory_advice.h"
@@ -86,11 +87,10 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
     uint32_t lower, upper, half;
   };
   std::vector<std::size_t> partBegin;
-  std::vector<Owned> owned;
+  std::unique_ptr<Owned[]> owned;  // every entry written by the filing below
   if (filed) {
     partBegin = filePositions(std::span(chunkPartAt), facetChunks, parts);
-    reserveHugePages(owned, partBegin[parts]);
-    owned.resize(partBegin[parts]);
+    owned = uninitializedArray<Owned>(partBegin[parts]);
     run.run(facetChunks, 1, [&](std::size_t c0, std::size_t c1) {
       for (std::size_t c = c0; c < c1; ++c)
         forHalfEdges(c * kFacetChunk, chunkEnd(c), [&](std::size_t h, uint32_t lower, uint32_t upper) {
@@ -123,9 +123,8 @@ EdgeStats buildAdjacency(std::span<const uint32_t> facetVertices, std::size_t ve
     }
   });
   for (std::size_t p = 0; p < parts; ++p) partEntries[p + 1] += partEntries[p];
-  std::vector<BucketEntry> bucket;
-  reserveHugePages(bucket, partEntries[parts]);
-  bucket.resize(partEntries[parts]);
+  // Every entry written by its part's filing below, before its matching reads it.
+  const std::unique_ptr<BucketEntry[]> bucket = uninitializedArray<BucketEntry>(partEntries[parts]);
   std::vector<EdgeStats> partStats(parts);
   run.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
     for (std::size_t p = p0; p < p1; ++p) {

@@ -46,7 +46,7 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
   const std::size_t n = corners.size(), chunks = (n + kChunk - 1) / kChunk;
   const unsigned parts = std::min(64u, 2 * runner.width);
   auto chunkEnd = [&](std::size_t c) { return std::min(n, (c + 1) * kChunk); };
-  const std::unique_ptr<uint8_t[]> part(new uint8_t[n]);
+  const std::unique_ptr<uint8_t[]> part = uninitializedArray<uint8_t>(n);
   std::vector<uint32_t> partSize(chunks * parts, 0);
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c)
@@ -60,7 +60,7 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
   // each partition reads only its own. (Gathering them instead from a scan of all corners per partition
   // cost more from 4 partitions on, and grew with their number: BM_WeldSplit, the aligner, 2 threads,
   // 4 partitions 14.8 ms filed against 15.6 gathered, 16 partitions 16.4 against 21.4.)
-  std::vector<uint32_t> members(n);  // the corners of every partition
+  const std::unique_ptr<uint32_t[]> members = uninitializedArray<uint32_t>(n);  // every partition's corners
   // partSize: from here, each chunk's next position in `members`
   const std::vector<std::size_t> partBegin = filePositions(std::span(partSize), chunks, parts);
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
@@ -68,8 +68,9 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
       for (std::size_t i = c * kChunk; i < chunkEnd(c); ++i)
         members[partSize[c * parts + part[i]]++] = static_cast<uint32_t>(i);
   });
-  const std::unique_ptr<uint32_t[]> first(new uint32_t[n]);  // the corner's first occurrence
-  std::vector<uint32_t> firsts(chunks * parts, 0);           // first occurrences per chunk and partition
+  const std::unique_ptr<uint32_t[]> first =
+      uninitializedArray<uint32_t>(n);              // each corner's first occurrence
+  std::vector<uint32_t> firsts(chunks * parts, 0);  // first occurrences per chunk and partition
   runner.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
     std::vector<uint32_t> table;                       // per slot an index into `seen` or kEmpty
     std::vector<std::pair<CornerKey, uint32_t>> seen;  // each key met, with its first corner
@@ -81,7 +82,7 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
       table.assign(capacity, kEmpty);
       seen.clear();
       seen.reserve(count / 4 + 16);
-      const uint32_t* const own = members.data() + partBegin[p];
+      const uint32_t* const own = members.get() + partBegin[p];
       for (std::size_t m = 0; m < count; ++m) {
         const std::size_t i = own[m];
         const CornerKey key = keyOf(corners[i]);
@@ -109,10 +110,8 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
     for (unsigned p = 0; p < parts; ++p) base[c + 1] += firsts[c * parts + p];
   }
   IndexedMesh mesh;
-  reserveHugePages(mesh.vertices, base[chunks]);
-  mesh.vertices.resize(base[chunks]);
-  reserveHugePages(mesh.facetVertices, n);
-  mesh.facetVertices.resize(n);
+  resizeFaultedIn(mesh.vertices, base[chunks], runner);
+  resizeFaultedIn(mesh.facetVertices, n, runner);
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c) {
       uint32_t v = base[c];

@@ -124,8 +124,7 @@ void parseBinary(std::span<const std::byte> bytes, uint32_t facetCount, const st
     return;
   }
   const std::size_t chunks = (facetCount + kChunkFacets - 1) / kChunkFacets;
-  reserveHugePages(soup.corners, std::size_t{facetCount} * 3);
-  soup.corners.resize(std::size_t{facetCount} * 3);
+  resizeFaultedIn(soup.corners, std::size_t{facetCount} * 3, runner);
   std::vector<uint8_t> nonFinite(chunks, 0);
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c) {
