@@ -18,10 +18,10 @@ void adviseHugePages(void* data, std::size_t bytes) noexcept {
 }
 
 void prefaultInParallel(void* data, std::size_t bytes, const ChunkRunner& runner) noexcept {
+  if (bytes == 0) return;
   constexpr std::uintptr_t kPage = 4096, kPiece = std::uintptr_t{2} << 20;
   const auto first = reinterpret_cast<std::uintptr_t>(data) & ~(kPage - 1);
   const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(data) + bytes + kPage - 1) & ~(kPage - 1);
-  if (bytes == 0) return;
   const std::size_t pieces = (end - first + kPiece - 1) / kPiece;
   try {
     runner.run(pieces, 1, [&](std::size_t p0, std::size_t p1) {

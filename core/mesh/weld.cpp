@@ -68,9 +68,9 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
       for (std::size_t i = c * kChunk; i < chunkEnd(c); ++i)
         members[partSize[c * parts + part[i]]++] = static_cast<uint32_t>(i);
   });
-  const std::unique_ptr<uint32_t[]> first =
-      uninitializedArray<uint32_t>(n);              // each corner's first occurrence
-  std::vector<uint32_t> firsts(chunks * parts, 0);  // first occurrences per chunk and partition
+  // Each corner's first occurrence, and how many first occurrences each chunk and partition holds.
+  const std::unique_ptr<uint32_t[]> first = uninitializedArray<uint32_t>(n);
+  std::vector<uint32_t> firsts(chunks * parts, 0);
   runner.run(parts, 1, [&](std::size_t p0, std::size_t p1) {
     std::vector<uint32_t> table;                       // per slot an index into `seen` or kEmpty
     std::vector<std::pair<CornerKey, uint32_t>> seen;  // each key met, with its first corner
