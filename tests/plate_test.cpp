@@ -2,7 +2,6 @@
 // arrangement invariants and its baseline, errors before slicing, template reuse, and the program.
 #include <gtest/gtest.h>
 
-#include <chrono>
 #include <cmath>
 #include <sstream>
 
@@ -248,14 +247,9 @@ TEST(ArrangeTest, AlignersNestBetterThanShelves) {
   for (const std::size_t n : {12u, 24u, 48u}) {
     std::vector<ArrangeItem> items(n);
     for (std::size_t k = 0; k < n; ++k) items[k].footprint = &fp[k % 2];
-    const auto start = std::chrono::steady_clock::now();
     const Arrangement a = arrangeFootprints(items, s);
-    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     const Arrangement again = arrangeFootprints(items, s);
     const Arrangement shelf = shelfPackBoxes(items, s);
-    if (n == 48) {
-      EXPECT_LT(seconds, 1.0);
-    }
     std::vector<CellShape> raw, grown;
     for (std::size_t k = 0; k < n; ++k) {
       const ArrangedPart& p = a.parts[k];
@@ -281,8 +275,8 @@ TEST(ArrangeTest, AlignersNestBetterThanShelves) {
         }
     EXPECT_LE(a.plates, shelf.plates) << n;
     EXPECT_GE(a.density(0), shelf.density(0)) << n;
-    std::printf("%zu parts: %u plates (shelf %u), first plate density %.3f (shelf %.3f), %.3f s\n", n,
-                a.plates, shelf.plates, a.density(0), shelf.density(0), seconds);
+    std::printf("%zu parts: %u plates (shelf %u), first plate density %.3f (shelf %.3f)\n", n, a.plates,
+                shelf.plates, a.density(0), shelf.density(0));
   }
 }
 
