@@ -529,11 +529,9 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
           for (const auto& path : *list) part.features.push_back(readMesh(path, read));
         if (scalesWhenRead(print)) scalePart(part, print);
         // The footprint covers the model and its add-ons (a removal never widens it).
-        FacetSoup all = part.model;
-        for (std::size_t f = 0; f < spec.add.size(); ++f)
-          all.corners.insert(all.corners.end(), part.features[f].corners.begin(),
-                             part.features[f].corners.end());
-        part.footprint = projectFootprint(all.corners, cell);
+        std::vector<std::span<const Point3f>> covered = {part.model.corners};
+        for (std::size_t f = 0; f < spec.add.size(); ++f) covered.emplace_back(part.features[f].corners);
+        part.footprint = projectFootprint(covered, cell, read.runner);
         // Topology: the template's table after the linear check, or built (weld + adjacency).
         SliceJobOptions options;
         if (!job.method.empty()) parseSliceMethod(job.method, options.slice.method);

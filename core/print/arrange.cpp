@@ -1,6 +1,7 @@
 #include "core/print/arrange.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <numeric>
@@ -77,28 +78,75 @@ void rotationCosSin(double degrees, double& c, double& s) {
 }
 
 Footprint projectFootprint(std::span<const Point3f> corners, double cell) {
+  const std::span<const Point3f> lists[1] = {corners};
+  return projectFootprint(lists, cell, serialChunkRunner());
+}
+
+Footprint projectFootprint(std::span<const std::span<const Point3f>> lists, double cell,
+                           const ChunkRunner& runner) {
   Footprint fp;
   fp.cell = cell;
-  if (corners.empty()) return fp;
-  double minX = INFINITY, minY = INFINITY, maxX = -INFINITY, maxY = -INFINITY;
-  for (const Point3f& p : corners) {
-    minX = std::min<double>(minX, p.x), maxX = std::max<double>(maxX, p.x);
-    minY = std::min<double>(minY, p.y), maxY = std::max<double>(maxY, p.y);
-  }
-  CellWindow w;
-  w.reset(cellOf(minX, cell), cellOf(minY, cell), cellOf(maxX, cell), cellOf(maxY, cell));
-  for (std::size_t f = 0; f + 2 < corners.size(); f += 3) {
-    const Point2d t[3] = {{corners[f].x, corners[f].y},
-                          {corners[f + 1].x, corners[f + 1].y},
-                          {corners[f + 2].x, corners[f + 2].y}};
-    const double ty0 = std::min({t[0].y, t[1].y, t[2].y}), ty1 = std::max({t[0].y, t[1].y, t[2].y});
-    const int32_t j0 = cellOf(ty0, cell), j1 = cellOf(ty1, cell);
-    for (int32_t j = j0; j <= j1; ++j) {
-      double xmin = 0, xmax = 0;
-      if (!slabRange(t, std::max(ty0, j * cell), std::min(ty1, (j + 1) * cell), xmin, xmax)) continue;
-      w.markRow(j, cellOf(xmin, cell), cellOf(xmax, cell));
+  // Facet f of the lists taken one after another: list `l` holds facets [first[l], first[l + 1]).
+  std::vector<std::size_t> first(lists.size() + 1, 0);
+  for (std::size_t l = 0; l < lists.size(); ++l) first[l + 1] = first[l] + lists[l].size() / 3;
+  const std::size_t facets = first.back();
+  if (facets == 0) return fp;
+  // Calls visit(a, b, c) for the corners of facets [f0, f1).
+  auto forFacets = [&](std::size_t f0, std::size_t f1, auto&& visit) {
+    for (std::size_t l = 0; l < lists.size(); ++l) {
+      const std::size_t b = std::max(f0, first[l]), e = std::min(f1, first[l + 1]);
+      for (std::size_t f = b; f < e; ++f) {
+        const Point3f* c = &lists[l][3 * (f - first[l])];
+        visit(c[0], c[1], c[2]);
+      }
     }
-  }
+  };
+  // Pieces of at least 32768 facets, one window each; fewer where the windows would pass 64 MiB.
+  constexpr std::size_t kMinFacets = 32768, kWindowBytes = std::size_t{64} << 20;
+  std::size_t pieces = std::clamp<std::size_t>(facets / kMinFacets, 1, std::max(1u, runner.width));
+  auto pieceBegin = [&](std::size_t k) { return facets * k / pieces; };
+  std::vector<std::array<double, 4>> extent(pieces);  // min x, min y, max x, max y of each piece
+  const ChunkRunner& run = pieces > 1 ? runner : serialChunkRunner();
+  run.run(pieces, 1, [&](std::size_t k0, std::size_t k1) {
+    for (std::size_t k = k0; k < k1; ++k) {
+      std::array<double, 4> e = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+      forFacets(pieceBegin(k), pieceBegin(k + 1), [&](const Point3f& a, const Point3f& b, const Point3f& c) {
+        for (const Point3f* p : {&a, &b, &c}) {
+          e[0] = std::min<double>(e[0], p->x), e[2] = std::max<double>(e[2], p->x);
+          e[1] = std::min<double>(e[1], p->y), e[3] = std::max<double>(e[3], p->y);
+        }
+      });
+      extent[k] = e;
+    }
+  });
+  double minX = INFINITY, minY = INFINITY, maxX = -INFINITY, maxY = -INFINITY;
+  for (const auto& e : extent)
+    minX = std::min(minX, e[0]), minY = std::min(minY, e[1]), maxX = std::max(maxX, e[2]),
+    maxY = std::max(maxY, e[3]);
+  CellWindow whole;
+  whole.reset(cellOf(minX, cell), cellOf(minY, cell), cellOf(maxX, cell), cellOf(maxY, cell));
+  const std::size_t cells = whole.cells.size();
+  pieces = std::min(pieces, std::max<std::size_t>(1, kWindowBytes / std::max<std::size_t>(cells, 1)));
+  std::vector<CellWindow> windows(pieces, whole);
+  const ChunkRunner& mark = pieces > 1 ? runner : serialChunkRunner();
+  mark.run(pieces, 1, [&](std::size_t k0, std::size_t k1) {
+    for (std::size_t k = k0; k < k1; ++k) {
+      CellWindow& w = windows[k];
+      forFacets(pieceBegin(k), pieceBegin(k + 1), [&](const Point3f& a, const Point3f& b, const Point3f& c) {
+        const Point2d t[3] = {{a.x, a.y}, {b.x, b.y}, {c.x, c.y}};
+        const double ty0 = std::min({t[0].y, t[1].y, t[2].y}), ty1 = std::max({t[0].y, t[1].y, t[2].y});
+        const int32_t j0 = cellOf(ty0, cell), j1 = cellOf(ty1, cell);
+        for (int32_t j = j0; j <= j1; ++j) {
+          double xmin = 0, xmax = 0;
+          if (!slabRange(t, std::max(ty0, j * cell), std::min(ty1, (j + 1) * cell), xmin, xmax)) continue;
+          w.markRow(j, cellOf(xmin, cell), cellOf(xmax, cell));
+        }
+      });
+    }
+  });
+  CellWindow& w = windows[0];  // the union of every piece's cells
+  for (std::size_t k = 1; k < pieces; ++k)
+    for (std::size_t i = 0; i < cells; ++i) w.cells[i] |= windows[k].cells[i];
   for (uint32_t j = 0; j < w.height; ++j)
     for (uint32_t i = 0; i < w.width; ++i)
       if (w.cells[static_cast<std::size_t>(j) * w.width + i])

@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "core/chunk_runner.h"
 #include "core/mesh/mesh.h"
 #include "core/slicing/contours.h"
 
@@ -35,6 +36,12 @@ struct Footprint {
 // The footprint of `corners` (3 per facet) on a grid of `cell` mm aligned at the model's origin.
 // Degenerate (zero-area) projections still mark the cells their edges cross. O(facets + cells).
 Footprint projectFootprint(std::span<const Point3f> corners, double cell);
+
+// The footprint of several corner lists together (a part and its add-ons), their facets split over the
+// runner's chunks, each marking a window of its own that are then merged: the same cells as one list of
+// them all on one thread, for any runner.
+Footprint projectFootprint(std::span<const std::span<const Point3f>> lists, double cell,
+                           const ChunkRunner& runner);
 
 // cos and sin of `degrees`, exact (0, +-1) for multiples of 90.
 void rotationCosSin(double degrees, double& c, double& s);
