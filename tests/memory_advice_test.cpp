@@ -13,6 +13,8 @@
 #include <string>
 #include <vector>
 
+#include "tests/fixtures/runners.h"
+
 namespace toposlice {
 namespace {
 
@@ -127,16 +129,6 @@ bool kernelPrefaults() {
   return probe.data != MAP_FAILED && madvise(probe.data, 4096, MADV_POPULATE_WRITE) == 0;
 }
 
-// A runner that runs its chunks one index at a time, last first, so that a piece left out or a range
-// taken from the wrong end shows.
-const ChunkRunner& backwardsRunner() {
-  static const ChunkRunner runner{[](std::size_t count, std::size_t, const ChunkBody& body) {
-                                    for (std::size_t i = count; i-- > 0;) body(i, i + 1);
-                                  },
-                                  4};
-  return runner;
-}
-
 // Every page of the span, and only those, is faulted in, whatever its alignment, and what was written
 // there before stays as it was.
 TEST(MemoryAdvice, PrefaultingFaultsInEveryPageOfTheSpanAndKeepsItsContents) {
@@ -147,7 +139,7 @@ TEST(MemoryAdvice, PrefaultingFaultsInEveryPageOfTheSpanAndKeepsItsContents) {
   const std::size_t bytes = 7 * kHuge + 123;
   begin[0] = std::byte{0x5a};  // already there: must be kept
   begin[kHuge] = std::byte{0xa5};
-  prefaultInParallel(begin, bytes, backwardsRunner());
+  prefaultInParallel(begin, bytes, fixtures::shuffledRunner(true));
   const std::size_t page = static_cast<std::size_t>(sysconf(_SC_PAGESIZE));
   std::byte* const firstPage = begin - (reinterpret_cast<std::uintptr_t>(begin) % page);
   const std::vector<bool> inside =
@@ -167,7 +159,8 @@ TEST(MemoryAdvice, PrefaultingFaultsInEveryPageOfTheSpanAndKeepsItsContents) {
 // resizeFaultedIn is resize: the elements already there keep their values, the new ones are zero, on
 // the serial runner and on one that splits the prefault.
 TEST(MemoryAdvice, ResizingFaultedInKeepsTheOldElementsAndZeroesTheNewOnes) {
-  for (const ChunkRunner* runner : {&serialChunkRunner(), &backwardsRunner()}) {
+  const ChunkRunner backwards = fixtures::shuffledRunner(true);
+  for (const ChunkRunner* runner : {&serialChunkRunner(), &backwards}) {
     std::vector<uint32_t> v = {7, 8, 9};
     const std::size_t n = (5 * kHuge + 777) / sizeof(uint32_t);
     resizeFaultedIn(v, n, *runner);

@@ -25,6 +25,7 @@
 #include "io/readers/ply_reader.h"
 #include "io/readers/stl_reader.h"
 #include "tests/fixtures/gzip_bytes.h"
+#include "tests/fixtures/runners.h"
 #include "tests/fixtures/scratch_dir.h"
 
 namespace toposlice {
@@ -244,12 +245,8 @@ TEST(MeshReader, PlyErrorsNameTheFaceVertexOrHeaderLine) {
 
 // A runner that calls the chunks last first, as if four threads took them in any order: the fixed-record
 // PLY reader must give the same soup as the serial runner.
-const ChunkRunner& backwardsRunner() {
-  static const ChunkRunner runner{[](std::size_t count, std::size_t, const ChunkBody& body) {
-                                    for (std::size_t c = count; c-- > 0;) body(c, c + 1);
-                                  },
-                                  4};
-  return runner;
+ChunkRunner backwardsRunner() {
+  return fixtures::shuffledRunner(true, 4);
 }
 
 // A binary PLY of `faces` random triangles over `vertices` points (a fixed seed), with what scanners and

@@ -19,6 +19,7 @@
 #include "io/readers/mesh_reader.h"
 #include "io/readers/stl_writer.h"
 #include "parallel/parallel.h"
+#include "tests/fixtures/runners.h"
 #include "tests/tool_runner.h"
 #include "tools/plate_job.h"
 #include "tools/slice_job.h"
@@ -239,16 +240,6 @@ ArrangeSettings plate8k() {
   return s;
 }
 
-// A runner that runs its chunks one index at a time, last first, on a width of 5: pieces that do not
-// fall on the lists' boundaries, merged in another order.
-const ChunkRunner& backwardsRunner() {
-  static const ChunkRunner runner{[](std::size_t count, std::size_t, const ChunkBody& body) {
-                                    for (std::size_t i = count; i-- > 0;) body(i, i + 1);
-                                  },
-                                  5};
-  return runner;
-}
-
 // The footprint of a part and its add-on, their facets split over the threads, is the one of both corner
 // lists joined on one thread, for every runner and cell size; an empty list changes nothing.
 TEST(ArrangeTest, SplitFootprintsOfSeveralListsEqualTheJoinedOneOnOneThread) {
@@ -256,12 +247,13 @@ TEST(ArrangeTest, SplitFootprintsOfSeveralListsEqualTheJoinedOneOnOneThread) {
   const FacetSoup monogram = readMesh(sharedModel("derived/monogram_A1_on_aligner.stl"), {});
   std::vector<Point3f> joined = model.corners;
   joined.insert(joined.end(), monogram.corners.begin(), monogram.corners.end());
-  const ChunkRunner parallel = parallelChunkRunner();
+  // The pool, and pieces taken last first on a width of 5 (not on the lists' boundaries).
+  const ChunkRunner parallel = parallelChunkRunner(), backwards = fixtures::shuffledRunner(true, 5);
   const std::span<const Point3f> lists[3] = {model.corners, {}, monogram.corners};
   for (const double cell : {0.5, 0.13}) {
     const Footprint serial = projectFootprint(joined, cell);
     ASSERT_GT(serial.centres.size(), 1000u);
-    for (const ChunkRunner* runner : {&serialChunkRunner(), &parallel, &backwardsRunner()}) {
+    for (const ChunkRunner* runner : {&serialChunkRunner(), &parallel, &backwards}) {
       const Footprint split = projectFootprint(lists, cell, *runner);
       EXPECT_EQ(split.cell, cell);
       EXPECT_TRUE(split.centres == serial.centres)

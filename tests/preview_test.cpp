@@ -14,6 +14,7 @@
 #include "core/raster/preview.h"
 #include "io/preview_png.h"
 #include "parallel/parallel.h"
+#include "tests/fixtures/runners.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/tool_runner.h"
 
@@ -143,10 +144,7 @@ TEST(Preview, PiecesGiveTheSerialPicture) {
   FacetSoup soup = fixtures::sphere(10, 512, 256);
   const FacetSoup second = fixtures::sphere(7, 512, 256);
   for (Point3f c : second.corners) soup.corners.push_back({c.x + 9.0f, c.y - 4.0f, c.z + 3.0f});
-  const ChunkRunner reversed{[](std::size_t count, std::size_t, const ChunkBody& body) {
-                               for (std::size_t c = count; c > 0; --c) body(c - 1, c);
-                             },
-                             8};
+  const ChunkRunner reversed = fixtures::shuffledRunner(true, 8);
   RgbImage serial, pieces, pooled;
   renderPreview(soup.corners, 800, 480, serial);
   renderPreview(soup.corners, 800, 480, pieces, reversed);

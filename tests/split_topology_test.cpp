@@ -18,27 +18,13 @@
 #include "io/readers/stl_reader.h"
 #include "parallel/parallel.h"
 #include "tests/fixtures/models.h"
+#include "tests/fixtures/runners.h"
 #include "tests/fixtures/shapes.h"
 
 namespace toposlice {
 namespace {
 
-// Runs the chunks one at a time, but in the order given: last first, or odd chunks before even ones.
-// A kernel whose result depended on the chunk order would differ from its serial form here. `width`
-// sets how many pieces the kernels split into (the weld splits from 4, the adjacency from 2).
-ChunkRunner shuffledRunner(bool reverse, unsigned width = 4) {
-  return ChunkRunner{[reverse](std::size_t count, std::size_t, const ChunkBody& body) {
-                       std::vector<std::size_t> order(count);
-                       for (std::size_t i = 0; i < count; ++i) order[i] = i;
-                       if (reverse)
-                         std::reverse(order.begin(), order.end());
-                       else
-                         std::stable_partition(order.begin(), order.end(),
-                                               [](std::size_t i) { return i % 2 == 1; });
-                       for (const std::size_t c : order) body(c, c + 1);
-                     },
-                     width};
-}
+using fixtures::shuffledRunner;
 
 struct Topology {
   IndexedMesh mesh;
