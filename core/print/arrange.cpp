@@ -1,12 +1,13 @@
 #include "core/print/arrange.h"
 
 #include <algorithm>
-#include <array>
 #include <bit>
 #include <cmath>
 #include <numeric>
 #include <stdexcept>
 #include <tuple>
+
+#include "core/mesh/mesh_info.h"
 
 namespace toposlice {
 namespace {
@@ -91,57 +92,54 @@ Footprint projectFootprint(std::span<const std::span<const Point3f>> lists, doub
   for (std::size_t l = 0; l < lists.size(); ++l) first[l + 1] = first[l] + lists[l].size() / 3;
   const std::size_t facets = first.back();
   if (facets == 0) return fp;
-  // Calls visit(a, b, c) for the corners of facets [f0, f1).
-  auto forFacets = [&](std::size_t f0, std::size_t f1, auto&& visit) {
+  // Calls visit(span) with the corners of facets [f0, f1) of the lists joined, one span per list touched.
+  auto forSpans = [&](std::size_t f0, std::size_t f1, auto&& visit) {
     for (std::size_t l = 0; l < lists.size(); ++l) {
       const std::size_t b = std::max(f0, first[l]), e = std::min(f1, first[l + 1]);
-      for (std::size_t f = b; f < e; ++f) {
-        const Point3f* c = &lists[l][3 * (f - first[l])];
-        visit(c[0], c[1], c[2]);
-      }
+      if (b < e) visit(lists[l].subspan(3 * (b - first[l]), 3 * (e - b)));
     }
   };
-  // Pieces of at least 32768 facets, one window each; fewer where the windows would pass 64 MiB.
+  // Piece k of n: facets [pieceBegin(k, n), pieceBegin(k + 1, n)), at least 32768 of them.
   constexpr std::size_t kMinFacets = 32768, kWindowBytes = std::size_t{64} << 20;
-  std::size_t pieces = std::clamp<std::size_t>(facets / kMinFacets, 1, std::max(1u, runner.width));
-  auto pieceBegin = [&](std::size_t k) { return facets * k / pieces; };
-  std::vector<std::array<double, 4>> extent(pieces);  // min x, min y, max x, max y of each piece
-  const ChunkRunner& run = pieces > 1 ? runner : serialChunkRunner();
-  run.run(pieces, 1, [&](std::size_t k0, std::size_t k1) {
-    for (std::size_t k = k0; k < k1; ++k) {
-      std::array<double, 4> e = {INFINITY, INFINITY, -INFINITY, -INFINITY};
-      forFacets(pieceBegin(k), pieceBegin(k + 1), [&](const Point3f& a, const Point3f& b, const Point3f& c) {
-        for (const Point3f* p : {&a, &b, &c}) {
-          e[0] = std::min<double>(e[0], p->x), e[2] = std::max<double>(e[2], p->x);
-          e[1] = std::min<double>(e[1], p->y), e[3] = std::max<double>(e[3], p->y);
-        }
-      });
-      extent[k] = e;
-    }
+  auto pieceBegin = [&](std::size_t k, std::size_t n) { return facets * k / n; };
+  auto runPieces = [&](std::size_t n, auto&& body) {
+    (n > 1 ? runner : serialChunkRunner()).run(n, 1, [&](std::size_t k0, std::size_t k1) {
+      for (std::size_t k = k0; k < k1; ++k)
+        forSpans(pieceBegin(k, n), pieceBegin(k + 1, n),
+                 [&](std::span<const Point3f> corners) { body(k, corners); });
+    });
+  };
+  // The bounds: each piece's spans' boxes (boundsOf), then the box of all their corners.
+  const std::size_t boundPieces = std::clamp<std::size_t>(facets / kMinFacets, 1, std::max(1u, runner.width));
+  std::vector<std::vector<Point3f>> boxCorners(boundPieces);
+  runPieces(boundPieces, [&](std::size_t k, std::span<const Point3f> corners) {
+    const BoundingBox box = boundsOf(corners);
+    boxCorners[k].insert(boxCorners[k].end(), {box.min, box.max});
   });
-  double minX = INFINITY, minY = INFINITY, maxX = -INFINITY, maxY = -INFINITY;
-  for (const auto& e : extent)
-    minX = std::min(minX, e[0]), minY = std::min(minY, e[1]), maxX = std::max(maxX, e[2]),
-    maxY = std::max(maxY, e[3]);
+  std::vector<Point3f> extremes;
+  for (const std::vector<Point3f>& c : boxCorners) extremes.insert(extremes.end(), c.begin(), c.end());
+  const BoundingBox box = boundsOf(extremes);
   CellWindow whole;
-  whole.reset(cellOf(minX, cell), cellOf(minY, cell), cellOf(maxX, cell), cellOf(maxY, cell));
+  whole.reset(cellOf(box.min.x, cell), cellOf(box.min.y, cell), cellOf(box.max.x, cell),
+              cellOf(box.max.y, cell));
+  // The cells: one window per piece (fewer pieces where the windows would pass 64 MiB), then their union.
   const std::size_t cells = whole.cells.size();
-  pieces = std::min(pieces, std::max<std::size_t>(1, kWindowBytes / std::max<std::size_t>(cells, 1)));
+  const std::size_t pieces =
+      std::min(boundPieces, std::max<std::size_t>(1, kWindowBytes / std::max<std::size_t>(cells, 1)));
   std::vector<CellWindow> windows(pieces, whole);
-  const ChunkRunner& mark = pieces > 1 ? runner : serialChunkRunner();
-  mark.run(pieces, 1, [&](std::size_t k0, std::size_t k1) {
-    for (std::size_t k = k0; k < k1; ++k) {
-      CellWindow& w = windows[k];
-      forFacets(pieceBegin(k), pieceBegin(k + 1), [&](const Point3f& a, const Point3f& b, const Point3f& c) {
-        const Point2d t[3] = {{a.x, a.y}, {b.x, b.y}, {c.x, c.y}};
-        const double ty0 = std::min({t[0].y, t[1].y, t[2].y}), ty1 = std::max({t[0].y, t[1].y, t[2].y});
-        const int32_t j0 = cellOf(ty0, cell), j1 = cellOf(ty1, cell);
-        for (int32_t j = j0; j <= j1; ++j) {
-          double xmin = 0, xmax = 0;
-          if (!slabRange(t, std::max(ty0, j * cell), std::min(ty1, (j + 1) * cell), xmin, xmax)) continue;
-          w.markRow(j, cellOf(xmin, cell), cellOf(xmax, cell));
-        }
-      });
+  runPieces(pieces, [&](std::size_t k, std::span<const Point3f> corners) {
+    CellWindow& w = windows[k];
+    for (std::size_t c = 0; c + 2 < corners.size(); c += 3) {
+      const Point2d t[3] = {{corners[c].x, corners[c].y},
+                            {corners[c + 1].x, corners[c + 1].y},
+                            {corners[c + 2].x, corners[c + 2].y}};
+      const double ty0 = std::min({t[0].y, t[1].y, t[2].y}), ty1 = std::max({t[0].y, t[1].y, t[2].y});
+      const int32_t j0 = cellOf(ty0, cell), j1 = cellOf(ty1, cell);
+      for (int32_t j = j0; j <= j1; ++j) {
+        double xmin = 0, xmax = 0;
+        if (!slabRange(t, std::max(ty0, j * cell), std::min(ty1, (j + 1) * cell), xmin, xmax)) continue;
+        w.markRow(j, cellOf(xmin, cell), cellOf(xmax, cell));
+      }
     }
   });
   CellWindow& w = windows[0];  // the union of every piece's cells
