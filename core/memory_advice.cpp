@@ -22,10 +22,12 @@ void prefaultInParallel(void* data, std::size_t bytes, const ChunkRunner& runner
   constexpr std::uintptr_t kPage = 4096, kPiece = std::uintptr_t{2} << 20;
   const auto first = reinterpret_cast<std::uintptr_t>(data) & ~(kPage - 1);
   const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(data) + bytes + kPage - 1) & ~(kPage - 1);
-  const std::size_t pieces = (end - first + kPiece - 1) / kPiece;
+  // Pieces on 2 MiB boundaries, so that no huge page is faulted from two threads at once.
+  const std::uintptr_t base = first & ~(kPiece - 1);
+  const std::size_t pieces = (end - base + kPiece - 1) / kPiece;
   try {
     runner.run(pieces, 1, [&](std::size_t p0, std::size_t p1) {
-      const std::uintptr_t from = first + p0 * kPiece, to = std::min(end, first + p1 * kPiece);
+      const std::uintptr_t from = std::max(first, base + p0 * kPiece), to = std::min(end, base + p1 * kPiece);
       // EINVAL (an older kernel) or ENOMEM leave the pages to be faulted in as they are written.
       (void)madvise(reinterpret_cast<void*>(from), to - from, MADV_POPULATE_WRITE);
     });
