@@ -306,6 +306,34 @@ TEST_F(CliToolOverwrite, OneExistingOutputLeavesTheOthersUnwritten) {
   expectNoTemporaries();
 }
 
+// Every output is checked before the model is read, the summary included (it was opened only after the
+// slicing, so a job ran to its end before refusing an existing summary). A model that is not a mesh
+// would fail the read: the existing output is what the run reports, so nothing was read first.
+TEST_F(CliToolOverwrite, ExistingSummaryIsRefusedBeforeTheModelIsRead) {
+  writeBytes(path("s.json"), "{\"kept\": true}\n");
+  writeBytes(path("notamesh.stl"), "this is not a mesh\n");
+  const RunResult early =
+      run({"slice", path("notamesh.stl").string(), "-H", "0.5", "-o", "out.cli", "--summary", "s.json"});
+  expectOneErrorLine(early);
+  EXPECT_TRUE(contains(early.err, "s.json: already exists")) << early.err;
+
+  const RunResult r = run({"slice", examplePart().string(), "-H", "0.5", "-o", "out.cli", "--masks", "m.sl1",
+                           "--printer", "sl1", "--summary", "s.json"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "s.json: already exists")) << r.err;
+  EXPECT_EQ(readBytes(path("s.json")), "{\"kept\": true}\n");
+  EXPECT_FALSE(fs::exists(path("out.cli")));
+  EXPECT_FALSE(fs::exists(path("m.sl1")));
+  expectNoTemporaries();
+
+  const RunResult forced =
+      run({"slice", examplePart().string(), "-H", "0.5", "-o", "out.cli", "--summary", "s.json", "--force"});
+  ASSERT_EQ(forced.code(), 0) << forced.describe();
+  EXPECT_TRUE(contains(readBytes(path("s.json")), "\"outputs\"")) << readBytes(path("s.json"));
+  EXPECT_TRUE(fs::exists(path("out.cli")));
+  expectNoTemporaries();
+}
+
 // tools/slice_job.h: "on any error or cancellation no output is left under its final name". The same
 // path given twice makes the run fail ("b.cli: already exists", although it did not exist before) after
 // the first writer has already committed b.cli, which stays behind.

@@ -455,8 +455,9 @@ static void checkPlanesCutModel(const std::filesystem::path& model, const std::v
 
 // The machine-readable summary (--summary FILE.json, docs/FORMATS.md): written through the job's
 // transaction, so it appears only together with the outputs it lists.
-static void writeSliceSummary(const std::filesystem::path& model, const SliceJobOptions& options,
-                              const SliceJobResult& r, const std::vector<double>& planes) {
+static void writeSliceSummary(OutputFile& file, const std::filesystem::path& model,
+                              const SliceJobOptions& options, const SliceJobResult& r,
+                              const std::vector<double>& planes) {
   nlohmann::ordered_json j;
   j["toposlice"] = TOPOSLICE_VERSION_TEXT;
   j["model"] = model.string();
@@ -506,7 +507,6 @@ static void writeSliceSummary(const std::filesystem::path& model, const SliceJob
   j["outputs"] = outputs;
   j["warnings"] = r.warnings;
   const std::string text = j.dump(2) + "\n";
-  OutputFile file(options.summary, options.overwrite);
   file.write(text.data(), text.size());
   file.commit();
 }
@@ -528,6 +528,11 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   for (const auto& output : allOutputs(options)) checkNotAnInput(output, inputs);
   validateSliceOptions(options);
   checkDistinctOutputs(options);
+  // An output that exists is refused before the model is read, not after the work: each writer checks
+  // again when it opens and when the job commits (a file may appear meanwhile).
+  if (!options.overwrite)
+    for (const auto& output : allOutputs(options))
+      if (outputPathExists(output)) throw OutputError(outputExistsMessage(output));
   // Every output of the job joins this transaction: they appear together at the end, or not at all.
   OutputTransaction transaction;
   SliceJobResult result;
@@ -627,6 +632,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   std::unique_ptr<MaskSink> maskSink;
   MaskTransfer transfer;  // gamma and the light-uniformity map of every mask
   std::unique_ptr<LayerReport> report;
+  std::optional<OutputFile> summaryFile;  // opened with the other outputs, written at the end
   OutputTransaction* const outputs = OutputTransaction::current();
   const auto setUpOutputs = [&] {
     const OutputTransaction::Adopt use(outputs);  // this may run on another thread
@@ -673,6 +679,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     }
     if (masks) transfer = maskTransfer(print, maskJob);
     if (!options.report.empty()) report = std::make_unique<LayerReport>(options.report, options.overwrite);
+    if (!options.summary.empty()) summaryFile.emplace(options.summary, options.overwrite);
   };
   parallelInvoke(topology, setUpOutputs);
   // Deferred previews (the printer files' pictures) are drawn as a task beside the bands. GOO and
@@ -835,7 +842,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   }
   if (report) report->finish();
   result.sliceSeconds = secondsSince(start);
-  if (!options.summary.empty()) writeSliceSummary(model, options, result, planes);
+  if (summaryFile) writeSliceSummary(*summaryFile, model, options, result, planes);
   transaction.commit(&interruptRequested());
   result.written = transaction.committed();
   return result;
