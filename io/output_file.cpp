@@ -112,6 +112,13 @@ std::string outputExistsMessage(const std::filesystem::path& p) {
   return p.string() + ": already exists (use --force to overwrite)";
 }
 
+void checkOutputAllowed(const std::filesystem::path& path, bool overwrite, OutputKind kind,
+                        std::string_view layerExt) {
+  if (!outputPathExists(path)) return;
+  if (!overwrite) throw OutputError(outputExistsMessage(path));
+  checkReplaceable(path, kind, layerExt);
+}
+
 void removePendingOutputs() noexcept {
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
     if (gPending[i].state.load(std::memory_order_acquire) == 2) ::unlink(gPending[i].path);
@@ -120,10 +127,7 @@ void removePendingOutputs() noexcept {
 
 OutputFile::OutputFile(std::filesystem::path finalPath, bool overwrite)
     : finalPath_(std::move(finalPath)), overwrite_(overwrite) {
-  if (outputPathExists(finalPath_)) {
-    if (!overwrite_) throw OutputError(outputExistsMessage(finalPath_));
-    checkReplaceable(finalPath_, OutputKind::File);
-  }
+  checkOutputAllowed(finalPath_, overwrite_);
   transaction_ = OutputTransaction::current();
   const std::uint64_t counter = gTempCounter.fetch_add(1, std::memory_order_relaxed);
   tempPath_ = finalPath_;

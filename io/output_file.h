@@ -126,6 +126,13 @@ enum class OutputKind { File, LayerFolder };
 // message names one entry toposlice would not have written. A missing path is fine.
 void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
 
+// The check every writer makes when it opens `path`, made up front by a command before its long work: a
+// missing path is fine; an existing one is refused without `overwrite` (outputExistsMessage) and, with
+// it, unless checkReplaceable allows it. Throws OutputError. The writers check again when they open and
+// commit (a file may appear meanwhile).
+void checkOutputAllowed(const std::filesystem::path& path, bool overwrite, OutputKind kind = OutputKind::File,
+                        std::string_view layerExt = {});
+
 // A group of outputs that appear together or not at all (see the transactions paragraph above). While
 // an OutputTransaction is alive it is the calling thread's current one (a later one nests inside it and
 // restores it when destroyed). Not copyable or movable.

@@ -34,10 +34,7 @@ std::filesystem::path siblingName(const std::filesystem::path& finalPath, const 
 
 StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite, std::string layerExt)
     : finalPath_(std::move(finalPath)), overwrite_(overwrite), layerExt_(std::move(layerExt)) {
-  if (outputPathExists(finalPath_)) {
-    if (!overwrite_) throw OutputError(outputExistsMessage(finalPath_));
-    checkReplaceable(finalPath_, OutputKind::LayerFolder, layerExt_);
-  }
+  checkOutputAllowed(finalPath_, overwrite_, OutputKind::LayerFolder, layerExt_);
   transaction_ = OutputTransaction::current();
   tempPath_ = siblingName(finalPath_, ".tmp-");
   if (::mkdir(tempPath_.c_str(), 0777) != 0) throw OutputError(cannotCreateMessage(finalPath_, errno));

@@ -334,6 +334,33 @@ TEST_F(CliToolOverwrite, ExistingSummaryIsRefusedBeforeTheModelIsRead) {
   expectNoTemporaries();
 }
 
+// The template and preview commands, and --force on a file toposlice did not write, are checked before
+// the model is read as well: a model that is not a mesh would fail the read, so the refused output is
+// what each run reports.
+TEST_F(CliToolOverwrite, RefusedOutputsOfEveryCommandAreNamedBeforeTheModelIsRead) {
+  writeBytes(path("notamesh.stl"), "this is not a mesh\n");
+  writeBytes(path("t.topo"), "kept\n");
+  writeBytes(path("p.png"), "kept\n");
+  writeBytes(path("foreign.json"), "not a summary toposlice wrote\n");
+  const std::string model = path("notamesh.stl").string();
+  const std::vector<std::pair<std::vector<std::string>, std::string>> runs{
+      {{"template", model, "-o", "t.topo"}, "t.topo: already exists"},
+      {{"preview", model, "-o", "p.png"}, "p.png: already exists"},
+      {{"slice", model, "-H", "0.5", "-o", "out.cli", "--summary", "foreign.json", "--force"},
+       "foreign.json: exists and is not a json file toposlice wrote"},
+  };
+  for (const auto& [args, message] : runs) {
+    const RunResult r = run(args);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, message)) << args[0] << ": " << r.err;
+  }
+  EXPECT_EQ(readBytes(path("t.topo")), "kept\n");
+  EXPECT_EQ(readBytes(path("p.png")), "kept\n");
+  EXPECT_EQ(readBytes(path("foreign.json")), "not a summary toposlice wrote\n");
+  EXPECT_FALSE(fs::exists(path("out.cli")));
+  expectNoTemporaries();
+}
+
 // tools/slice_job.h: "on any error or cancellation no output is left under its final name". The same
 // path given twice makes the run fail ("b.cli: already exists", although it did not exist before) after
 // the first writer has already committed b.cli, which stays behind.

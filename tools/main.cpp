@@ -309,6 +309,7 @@ int runTemplate(const std::string& model, const MeshReadOptions& read, const std
                 bool quiet) {
   const auto start = std::chrono::steady_clock::now();
   checkNotAnInput(output, {model});
+  checkOutputAllowed(output, force);  // before the model is read, not after the work
   // The table is written in a transaction that commits only when no stop signal has come: an
   // interrupted run leaves no table, a finished one a complete table.
   OutputTransaction transaction;
@@ -340,6 +341,7 @@ int runPreview(const std::string& model, const MeshReadOptions& read, const std:
       width > 8192 || height > 8192)
     throw InputError("--size " + size + ": expected WIDTHxHEIGHT in pixels, each 1 to 8192 (e.g. 800x480)");
   checkNotAnInput(output, {model});
+  checkOutputAllowed(output, force);  // before the model is read, not after the work
   OutputTransaction transaction;
   const FacetSoup soup = readMesh(model, read);
   const std::vector<uint8_t> png = previewPng(soup.corners, width, height, parallelChunkRunner());

@@ -528,11 +528,16 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   for (const auto& output : allOutputs(options)) checkNotAnInput(output, inputs);
   validateSliceOptions(options);
   checkDistinctOutputs(options);
-  // An output that exists is refused before the model is read, not after the work: each writer checks
-  // again when it opens and when the job commits (a file may appear meanwhile).
-  if (!options.overwrite)
-    for (const auto& output : allOutputs(options))
-      if (outputPathExists(output)) throw OutputError(outputExistsMessage(output));
+  // An output that may not be written (it exists and there is no --force, or it is not toposlice's to
+  // replace) is refused before the model is read, not after the work; each writer checks again when it
+  // opens and when the job commits (a file may appear meanwhile).
+  for (const auto& output : allOutputs(options)) {
+    const std::string ext = output == options.masks.output ? lowerExtension(output) : std::string("-");
+    if (ext.empty() || ext == ".exr")
+      checkOutputAllowed(output, options.overwrite, OutputKind::LayerFolder, ext.empty() ? ".png" : ".exr");
+    else
+      checkOutputAllowed(output, options.overwrite);
+  }
   // Every output of the job joins this transaction: they appear together at the end, or not at all.
   OutputTransaction transaction;
   SliceJobResult result;
