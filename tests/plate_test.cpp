@@ -460,6 +460,42 @@ TEST_F(PlateTest, EveryPartThatCannotBeUsedIsNamedInOneError) {
   EXPECT_FALSE(fs::exists(dir_ / "r.json"));
 }
 
+// Outputs that may not be written are refused before the work: the report and the first plate's files
+// before any part is read (a missing model would fail the read, so the refused report is what is
+// reported), a later plate's files once the arrangement has made that plate.
+TEST_F(PlateTest, ExistingOutputsAreRefusedBeforeTheSlicing) {
+  tool_test::writeBytes(dir_ / "r.json", "{\"kept\": 1}\n");
+  const std::string missing =
+      "{\"name\": \"m\", \"model\": " + q((dir_ / "nowhere.stl").string()) + ", \"placement\": \"auto\"}";
+  try {
+    runPlateJob(job("{\"printer\": \"generic-8k\", \"settings\": {\"layer_height\": 0.5}, \"parts\": [" +
+                    missing + "], \"outputs\": {\"report\": \"r.json\"}}"),
+                nullptr);
+    FAIL() << "accepted";
+  } catch (const OutputError& e) {
+    EXPECT_NE(std::string(e.what()).find("r.json: already exists"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(readBytes(dir_ / "r.json"), "{\"kept\": 1}\n");
+
+  // Two 16.5 x 12 mm parts on a 30 x 20 mm display with a 1 mm margin: two plates, the second's archive
+  // exists.
+  tool_test::writeBytes(dir_ / "m-plate2.sl1", "not an archive\n");
+  const std::string part = q(tool_test::examplePart());
+  try {
+    runPlateJob(job("{\"settings\": {\"layer_height\": 0.5, \"pixel\": 0.05, \"resolution\": [600, 400]}, "
+                    "\"arrange\": {\"margin\": 1, \"spacing\": 1},"
+                    "\"parts\": [{\"name\": \"a\", \"model\": " +
+                    part + ", \"placement\": \"auto\"}, {\"name\": \"b\", \"model\": " + part +
+                    ", \"placement\": \"auto\"}], \"outputs\": {\"masks\": \"m.sl1\"}}"),
+                nullptr);
+    FAIL() << "accepted";
+  } catch (const OutputError& e) {
+    EXPECT_NE(std::string(e.what()).find("m-plate2.sl1: already exists"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "m.sl1"));
+  EXPECT_EQ(readBytes(dir_ / "m-plate2.sl1"), "not an archive\n");
+}
+
 }  // namespace
 }  // namespace toposlice
 

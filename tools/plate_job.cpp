@@ -58,6 +58,17 @@ void rotateSoup(FacetSoup& soup, double degrees) {
   }
 }
 
+// Outputs of plates [first, end) that may not be written (they exist and the job does not overwrite, or
+// they are not toposlice's to replace), refused before the slicing; the report with the first plate.
+void checkPlateOutputs(const PlateJob& job, uint32_t first, uint32_t end) {
+  if (first == 0 && !job.report.empty()) checkOutputAllowed(job.report, job.overwrite);
+  for (uint32_t plate = first; plate < end; ++plate) {
+    if (!job.masks.empty()) checkMaskOutputAllowed(plateOutputPath(job.masks, plate), job.overwrite);
+    if (!job.picture.empty()) checkOutputAllowed(plateOutputPath(job.picture, plate), job.overwrite);
+    for (const auto& c : job.contours) checkOutputAllowed(plateOutputPath(c, plate), job.overwrite);
+  }
+}
+
 BoundingBox unite(const BoundingBox& a, const BoundingBox& b) {
   return {{std::min(a.min.x, b.min.x), std::min(a.min.y, b.min.y), std::min(a.min.z, b.min.z)},
           {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
@@ -503,6 +514,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   std::erase_if(inputs, [](const std::filesystem::path& p) { return p.empty(); });
   for (const auto& o : outputs)
     if (!o.empty()) checkNotAnInput(o, inputs);
+  checkPlateOutputs(job, 0, 1);  // before anything is read; the other plates' once they are known
 
   // Read every part (and each distinct template table once), in parallel across parts.
   auto start = std::chrono::steady_clock::now();
@@ -605,6 +617,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   }
   result.arrangeSeconds = secondsSince(start);
   result.plates = arranged.plates;
+  checkPlateOutputs(job, 1, result.plates);
   for (uint32_t p = 0; p < arranged.plates; ++p) result.density.push_back(arranged.density(p));
   result.layers.assign(result.plates, 0);
   result.volumeMl.assign(result.plates, 0.0);

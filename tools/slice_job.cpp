@@ -532,9 +532,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   // replace) is refused before the model is read, not after the work; each writer checks again when it
   // opens and when the job commits (a file may appear meanwhile).
   for (const auto& output : allOutputs(options)) {
-    const std::string ext = output == options.masks.output ? lowerExtension(output) : std::string("-");
-    if (ext.empty() || ext == ".exr")
-      checkOutputAllowed(output, options.overwrite, OutputKind::LayerFolder, ext.empty() ? ".png" : ".exr");
+    if (output == options.masks.output)
+      checkMaskOutputAllowed(output, options.overwrite);
     else
       checkOutputAllowed(output, options.overwrite);
   }

@@ -14,6 +14,7 @@
 #include "io/masks/png_directory_writer.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
+#include "io/output_file.h"
 
 namespace toposlice {
 
@@ -61,15 +62,21 @@ void checkMaskLayerSize(const MaskImage& mask, const PixelGrid& grid, const std:
 
 std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const MaskJob& job,
                                        bool overwrite) {
-  std::string ext = path.extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(),
-                 [](char c) { return static_cast<char>(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c); });
+  const std::string ext = lowerExtension(path);
   if (ext == ".sl1" || ext == ".sl1s") return makeSl1Sink(path, job, overwrite);
   if (ext == ".goo") return makeGooSink(path, job, overwrite);
   if (ext == ".nanodlp") return makeNanoDlpSink(path, job, overwrite);
   if (ext == ".exr") return makeExrSink(path, job, overwrite);
   if (ext == ".vdb") return makeVdbSink(path, job, overwrite);
   return makePngDirectorySink(path, job, overwrite);
+}
+
+void checkMaskOutputAllowed(const std::filesystem::path& path, bool overwrite) {
+  const std::string ext = lowerExtension(path);
+  if (ext.empty() || ext == ".exr")
+    checkOutputAllowed(path, overwrite, OutputKind::LayerFolder, ext.empty() ? ".png" : ".exr");
+  else
+    checkOutputAllowed(path, overwrite);
 }
 
 std::string maskFilePrefix(const std::string& name) {

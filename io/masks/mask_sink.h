@@ -175,6 +175,10 @@ class LayerFolderSink : public EncodingMaskSink {
 // output exists and !overwrite or cannot be created.
 std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const MaskJob& job, bool overwrite);
 
+// The check makeMaskSink's sink makes when it opens `path` (checkOutputAllowed, output_file.h: a file, or
+// for a PNG or EXR stack a folder of its layers), for a command to make before its long work.
+void checkMaskOutputAllowed(const std::filesystem::path& path, bool overwrite);
+
 // File name of layer `index`: "<prefix><index>.<ext>", the index zero-padded to 5 digits, or to as many
 // as layerCount - 1 needs, so that names sort in layer order. `prefix` is the job name with path
 // separators and control characters replaced by '_' ("layer" when empty).
