@@ -60,8 +60,8 @@ std::vector<std::string_view> signaturesFor(const std::string& ext) {
   if (ext == ".vdb") return {" BDV"sv};
   if (ext == ".png") return {"\x89PNG"sv};
   if (ext == ".topo") return {"TOPOSLC"sv};
-  if (ext == ".csv") return {"layer,"sv};
-  if (ext == ".json") return {"{"sv};
+  if (ext == ".csv") return {"layer,z_mm,area_"sv};         // the per-layer report's header
+  if (ext == ".json") return {"{\n  \"toposlice\": \""sv};  // summaries and plate reports: their first key
   return {};
 }
 
@@ -106,6 +106,12 @@ bool outputPathExists(const std::filesystem::path& p) {
   std::error_code ec;
   const auto st = std::filesystem::symlink_status(p, ec);
   return !ec && st.type() != std::filesystem::file_type::not_found;
+}
+
+std::filesystem::path resolvedPath(const std::filesystem::path& path) {
+  std::error_code ec;
+  std::filesystem::path resolved = std::filesystem::weakly_canonical(std::filesystem::absolute(path), ec);
+  return ec ? std::filesystem::absolute(path).lexically_normal() : resolved;
 }
 
 std::string outputExistsMessage(const std::filesystem::path& p) {
@@ -300,20 +306,19 @@ void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::s
                         ": is a folder; toposlice writes a file there and never replaces a folder" + refused);
     if (st.type() != fs::file_type::regular)
       throw OutputError(path.string() + ": is not a regular file; not replaced" + refused);
+    if (fs::file_size(path, ec) == 0 && !ec) return;  // an empty file holds nothing to lose
     const std::vector<std::string_view> signatures = signaturesFor(lowerExtension(path));
-    if (signatures.empty()) return;
-    char head[16] = {};
+    if (signatures.empty())
+      throw OutputError(path.string() + ": exists, and toposlice writes no '" + lowerExtension(path) +
+                        "' files, so it cannot have written it; not replaced" + refused);
+    char head[32] = {};
     const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
     if (fd < 0) throw OutputError(path.string() + ": cannot read the existing file: " + reason(errno));
     const ssize_t n = ::read(fd, head, sizeof head);
     ::close(fd);
-    if (n == 0) return;  // an empty file holds nothing to lose
     std::string_view start(head, n > 0 ? static_cast<std::size_t>(n) : 0);
-    const std::size_t first = start.find_first_not_of(" \t\r\n");
-    for (const std::string_view sig : signatures) {
+    for (const std::string_view sig : signatures)
       if (start.starts_with(sig)) return;
-      if (sig == "{" && first != std::string_view::npos && start[first] == '{') return;
-    }
     throw OutputError(path.string() + ": exists and is not a " + lowerExtension(path).substr(1) +
                       " file toposlice wrote (its first bytes differ); not replaced" + refused);
   }

@@ -96,6 +96,10 @@ void removePendingOutputs() noexcept;
 // before refusing to replace an output.
 bool outputPathExists(const std::filesystem::path& path);
 
+// `path` as the file it names, for comparing two spellings of one file: absolute, with the links in its
+// existing folders resolved ("same/o.cli" with same -> . is "<cwd>/o.cli"); the path itself may not exist.
+std::filesystem::path resolvedPath(const std::filesystem::path& path);
+
 // "<path>: already exists (use --force to overwrite)", the one message for a refused output.
 std::string outputExistsMessage(const std::filesystem::path& path);
 
@@ -120,10 +124,11 @@ enum class OutputKind { File, LayerFolder };
 
 // Throws OutputError unless the existing entry at `path` may be replaced by a toposlice output of that
 // kind: a File output replaces a regular file (or a link) whose first bytes match the format of its
-// extension (.cli, .svg, .3mf, .sl1, .sl1s, .goo, .nanodlp, .vdb, .png, .topo, .csv, .json; any empty file; a
-// file of another extension is not checked); a LayerFolder output replaces a folder holding only regular
-// files named <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png", ".exr"). The
-// message names one entry toposlice would not have written. A missing path is fine.
+// extension (.cli, .svg, .3mf, .sl1, .sl1s, .goo, .nanodlp, .vdb, .png, .topo; a .csv that starts with the
+// per-layer report's header, a .json whose first key is "toposlice"), or any empty file; a file of any
+// other extension is never replaced (toposlice writes none); a LayerFolder output replaces a folder holding
+// only regular files named <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png",
+// ".exr"). The message names one entry toposlice would not have written. A missing path is fine.
 void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
 
 // The check every writer makes when it opens `path`, made up front by a command before its long work: a

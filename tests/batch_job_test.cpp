@@ -314,7 +314,7 @@ TEST(BatchJob, RejectsClashingNamesAndPaths) {
   expectError([](Json& j) { j["variants"][0]["report"] = "models/template.stl"; }, "variants[0].report",
               "is also an input (template.model)");
   expectError([](Json& j) { j["template"]["table"] = "features/monogram.stl"; }, "template.table",
-              "is also an input (variants[0].add[0])");
+              "unknown table format \".stl\" (expected .topo)");
 }
 
 TEST(BatchJob, SharedInputsAreFine) {

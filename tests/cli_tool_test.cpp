@@ -310,7 +310,7 @@ TEST_F(CliToolOverwrite, OneExistingOutputLeavesTheOthersUnwritten) {
 // slicing, so a job ran to its end before refusing an existing summary). A model that is not a mesh
 // would fail the read: the existing output is what the run reports, so nothing was read first.
 TEST_F(CliToolOverwrite, ExistingSummaryIsRefusedBeforeTheModelIsRead) {
-  writeBytes(path("s.json"), "{\"kept\": true}\n");
+  writeBytes(path("s.json"), "{\n  \"toposlice\": \"an earlier run\"}\n");
   writeBytes(path("notamesh.stl"), "this is not a mesh\n");
   const RunResult early =
       run({"slice", path("notamesh.stl").string(), "-H", "0.5", "-o", "out.cli", "--summary", "s.json"});
@@ -321,7 +321,7 @@ TEST_F(CliToolOverwrite, ExistingSummaryIsRefusedBeforeTheModelIsRead) {
                            "--printer", "sl1", "--summary", "s.json"});
   expectOneErrorLine(r);
   EXPECT_TRUE(contains(r.err, "s.json: already exists")) << r.err;
-  EXPECT_EQ(readBytes(path("s.json")), "{\"kept\": true}\n");
+  EXPECT_EQ(readBytes(path("s.json")), "{\n  \"toposlice\": \"an earlier run\"}\n");
   EXPECT_FALSE(fs::exists(path("out.cli")));
   EXPECT_FALSE(fs::exists(path("m.sl1")));
   expectNoTemporaries();

@@ -178,6 +178,52 @@ TEST_F(OutputSafety, ForceRefusesAFileOfAnotherFormat) {
   EXPECT_EQ(readBytes(path("p.cli")), "my own notes, not a CLI file\n");
 }
 
+// A JSON or CSV file is replaced only when it is a summary, plate report or per-layer report (their own
+// first bytes), not any JSON object or any text starting "layer,"; a file of an extension toposlice
+// never writes is never replaced, and the commands whose output has one kind refuse other names.
+TEST_F(OutputSafety, ForceRefusesForeignJsonCsvAndOtherExtensions) {
+  writeBytes(path("notes.json"), "{\"my\": \"settings\"}\n");
+  writeBytes(path("layers.csv"), "layer,owner\n1,me\n");
+  writeBytes(path("x.dat"), "precious\n");
+  writeBytes(path("x.jpg"), "JPEGDATA\n");
+  const std::string part = examplePart().string();
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
+      {{"slice", part, "-H", "0.5", "--summary", "notes.json", "--force"}, "notes.json: exists and is not"},
+      {{"slice", part, "-H", "0.5", "--report", "layers.csv", "--force"}, "layers.csv: exists and is not"},
+      {{"template", part, "-o", "x.dat", "--force"}, "x.dat: the table is a .topo file"},
+      {{"preview", part, "-o", "x.jpg", "--force"}, "x.jpg: the picture is a PNG"},
+  };
+  for (const auto& [args, message] : cases) {
+    const RunResult r = run(args);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, message)) << r.err;
+  }
+  EXPECT_EQ(readBytes(path("notes.json")), "{\"my\": \"settings\"}\n");
+  EXPECT_EQ(readBytes(path("layers.csv")), "layer,owner\n1,me\n");
+  EXPECT_EQ(readBytes(path("x.dat")), "precious\n");
+  EXPECT_EQ(readBytes(path("x.jpg")), "JPEGDATA\n");
+  expectNoTemporaries();
+
+  // What toposlice wrote is replaced: a summary and a report of an earlier run.
+  ASSERT_EQ(run({"slice", part, "-H", "0.5", "--summary", "s.json", "--report", "r.csv"}).code(), 0);
+  const RunResult again =
+      run({"slice", part, "-H", "1", "--summary", "s.json", "--report", "r.csv", "--force"});
+  ASSERT_EQ(again.code(), 0) << again.describe();
+  EXPECT_TRUE(contains(readBytes(path("r.csv")), "\n6,")) << "7 layers at 1 mm";
+  expectNoTemporaries();
+}
+
+// A file-size limit (ulimit -f) does not kill the job with its temporaries in place: the write fails, the
+// job says so in one line and leaves nothing.
+TEST_F(OutputSafety, FileSizeLimitFailsTheJobCleanly) {
+  setFileSizeLimit(4096, /*ignoreSignal=*/false);
+  const RunResult r = run({"slice", examplePart().string(), "-H", "0.05", "-o", "a.cli"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "a.cli: cannot write")) << r.err;
+  EXPECT_FALSE(fs::exists(path("a.cli")));
+  expectNoTemporaries();
+}
+
 // ---------------------------------------------------------------------------------------------------
 // 4. An output is never an input.
 
@@ -202,6 +248,55 @@ TEST_F(OutputSafety, OutputThatIsAnInputIsRefusedEvenWithForce) {
     EXPECT_EQ(readBytes(path("copy.stl")), model) << testing::PrintToString(args);
   }
   EXPECT_TRUE(fs::is_symlink(path("link.csv")));
+  expectNoTemporaries();
+}
+
+// The profile and the light map are inputs too; a folder output (a PNG stack) replaces the whole folder,
+// so an input inside it is refused as well; and one file spelt twice through a linked folder is one
+// output given twice, for slice and for batch jobs.
+TEST_F(OutputSafety, ProfilesLightMapsInFoldersAndLinkedSpellingsAreCaught) {
+  writeBytes(path("prof.json"),
+             "{\"printers\": {\"lab\": {\"inherits\": \"sl1\"}}, \"materials\": {\"resin\": "
+             "{\"exposure_time\": 6.5}}}");
+  const std::string profile = readBytes(path("prof.json"));
+  const std::string part = examplePart().string();
+  RunResult r = run({"slice", part, "-H", "0.5", "--profile", "prof.json", "--printer", "lab", "--material",
+                     "resin", "--masks", "a.sl1", "--summary", "prof.json", "--force"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "input")) << r.err;
+  EXPECT_EQ(readBytes(path("prof.json")), profile);
+
+  // The light map, inside the folder that a PNG stack would replace (its name even looks like a layer's).
+  fs::create_directory(path("lm"));
+  MaskImage light;
+  light.width = 1440;
+  light.height = 2560;
+  light.pixels.assign(std::size_t{1440} * 2560, uint8_t{200});
+  std::vector<uint8_t> png;
+  encodeMaskPng(light, png);
+  writeBytes(path("lm/uniformity1.png"), std::string(png.begin(), png.end()));
+  r = run({"slice", part, "-H", "0.5", "--printer", "sl1", "--antialias", "--light-map", "lm/uniformity1.png",
+           "--masks", "lm", "--force"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "holds the job's input")) << r.err;
+  EXPECT_TRUE(fs::exists(path("lm/uniformity1.png")));
+
+  fs::create_directory_symlink(".", path("same"));
+  r = run({"slice", part, "-H", "0.5", "-o", "f.cli", "-o", "same/f.cli", "--force"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "given as more than one output")) << r.err;
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": " + nlohmann::json(part).dump() +
+                 "}, \"settings\": {\"layer_height\": 0.5, \"overwrite\": true}, \"variants\": ["
+                 "{\"name\": \"a\", \"model\": " +
+                 nlohmann::json(part).dump() +
+                 ", \"contours\": \"o.cli\"},"
+                 "{\"name\": \"b\", \"model\": " +
+                 nlohmann::json(part).dump() + ", \"contours\": \"same/o.cli\"}]}");
+  r = run({"batch", "job.json", "-q"});
+  EXPECT_NE(r.code(), 0) << r.describe();
+  EXPECT_TRUE(contains(r.err, "already written by")) << r.describe();
+  EXPECT_FALSE(fs::exists(path("o.cli")));
   expectNoTemporaries();
 }
 

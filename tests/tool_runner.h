@@ -261,7 +261,7 @@ class CliToolBase : public testing::Test {
         limit.rlim_cur = limit.rlim_max = fileSizeLimit_;
         ::setrlimit(RLIMIT_FSIZE, &limit);
         struct sigaction ignore {};
-        ignore.sa_handler = SIG_IGN;
+        ignore.sa_handler = ignoreXfsz_ ? SIG_IGN : SIG_DFL;
         ::sigaction(SIGXFSZ, &ignore, nullptr);
       }
       sigset_t none;
@@ -318,10 +318,15 @@ class CliToolBase : public testing::Test {
 
   // A limit on the size of every file the program writes (RLIMIT_FSIZE; 0: none): a write past it fails
   // with EFBIG, a disk-full failure without a full disk.
-  void setFileSizeLimit(rlim_t bytes) { fileSizeLimit_ = bytes; }
+  // With ignoreSignal false, SIGXFSZ keeps its default action (the program must ignore it itself).
+  void setFileSizeLimit(rlim_t bytes, bool ignoreSignal = true) {
+    fileSizeLimit_ = bytes;
+    ignoreXfsz_ = ignoreSignal;
+  }
 
   fs::path root_, dir_;
   rlim_t fileSizeLimit_ = 0;
+  bool ignoreXfsz_ = true;
   int runs_ = 0;
   std::string outPath_, errPath_;
 };

@@ -6,6 +6,7 @@
 
 #include "core/mesh/weld.h"
 #include "io/errors.h"
+#include "io/output_file.h"
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
 
@@ -25,7 +26,10 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     if (save && !job.templateFile.empty()) {
       if (!job.templateFile.parent_path().empty())
         std::filesystem::create_directories(job.templateFile.parent_path());
+      // Committed only when no stop signal has come: an interrupted batch saves no table.
+      OutputTransaction transaction;
       writeTemplateFile(job.templateFile, t.table, false);
+      transaction.commit(&interruptRequested());
       t.source += ", saved to " + job.templateFile.string();
     }
   } else {

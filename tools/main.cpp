@@ -309,6 +309,8 @@ int runTemplate(const std::string& model, const MeshReadOptions& read, const std
                 bool quiet) {
   const auto start = std::chrono::steady_clock::now();
   checkNotAnInput(output, {model});
+  if (lowerExtension(output) != ".topo")
+    throw InputError(output + ": the table is a .topo file: give a .topo file name");
   checkOutputAllowed(output, force);  // before the model is read, not after the work
   // The table is written in a transaction that commits only when no stop signal has come: an
   // interrupted run leaves no table, a finished one a complete table.
@@ -341,6 +343,8 @@ int runPreview(const std::string& model, const MeshReadOptions& read, const std:
       width > 8192 || height > 8192)
     throw InputError("--size " + size + ": expected WIDTHxHEIGHT in pixels, each 1 to 8192 (e.g. 800x480)");
   checkNotAnInput(output, {model});
+  if (lowerExtension(output) != ".png")
+    throw InputError(output + ": the picture is a PNG: give a .png file name");
   checkOutputAllowed(output, force);  // before the model is read, not after the work
   OutputTransaction transaction;
   const FacetSoup soup = readMesh(model, read);
@@ -542,6 +546,9 @@ int run(int argc, char** argv) {
   ThreadLimit limit(common.threads);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  // A file-size limit (ulimit -f) would kill the process with its temporaries in place; ignored, the
+  // write fails with EFBIG instead and the job ends as on a full disk, leaving nothing behind.
+  std::signal(SIGXFSZ, SIG_IGN);
   auto runCommand = [&]() -> int {
     if (*info) return runInfo(model, meshReadOptions(common));
     if (*preview)
@@ -634,6 +641,7 @@ int run(int argc, char** argv) {
     }
     options.rebuildOnMismatch = onMismatch == "rebuild";
     options.templateFile = templatePath;
+    options.otherInputs = {profilePath, options.print.lightMap};  // never replaced by an output either
     return runSlice(model, options, common);
   };
   try {

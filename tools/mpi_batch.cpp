@@ -727,6 +727,9 @@ int run(int argc, char** argv) {
 
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  // A file-size limit (ulimit -f) would kill the process with its temporaries in place; ignored, the
+  // write fails with EFBIG instead and the job ends as on a full disk, leaving nothing behind.
+  std::signal(SIGXFSZ, SIG_IGN);
   int status = 1;
   {
     ThreadLimit limit(options.threads);

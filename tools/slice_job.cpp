@@ -359,10 +359,13 @@ static std::vector<std::filesystem::path> allOutputs(const SliceJobOptions& opti
 
 static void checkDistinctOutputs(const SliceJobOptions& options) {
   std::vector<std::filesystem::path> all = allOutputs(options);
-  for (auto& p : all) p = std::filesystem::absolute(p).lexically_normal();
+  std::vector<std::filesystem::path> resolved;
+  for (const auto& p : all) resolved.push_back(resolvedPath(p));
   for (std::size_t i = 0; i < all.size(); ++i)
     for (std::size_t j = i + 1; j < all.size(); ++j)
-      if (all[i] == all[j]) throw InputError(all[i].string() + ": given as more than one output");
+      if (resolved[i] == resolved[j])
+        throw InputError(all[j].string() + ": given as more than one output" +
+                         (all[i] == all[j] ? "" : " (it is " + all[i].string() + ")"));
 }
 
 void checkNotAnInput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs) {
@@ -370,6 +373,18 @@ void checkNotAnInput(const std::filesystem::path& output, const std::vector<std:
   // device and inode, following links, so links and hard links to an input are caught as well.
   struct stat out {};
   if (::stat(output.c_str(), &out) != 0) return;
+  if (S_ISDIR(out.st_mode)) {
+    // A folder output (a PNG or EXR stack) replaces the whole folder: no input may lie inside it.
+    const std::filesystem::path folder = resolvedPath(output);
+    for (const auto& input : inputs) {
+      if (input.empty()) continue;
+      const std::filesystem::path in = resolvedPath(input);
+      const auto [f, i] = std::mismatch(folder.begin(), folder.end(), in.begin(), in.end());
+      if (f == folder.end() && i != in.end())
+        throw InputError(output.string() + ": holds the job's input " + input.string() +
+                         "; an output never replaces an input, even with --force");
+    }
+  }
   for (const auto& input : inputs) {
     struct stat in {};
     if (input.empty() || ::stat(input.c_str(), &in) != 0) continue;

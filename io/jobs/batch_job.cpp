@@ -53,7 +53,8 @@ class JobParser : public JsonReader {
     checkKeys(v, at, {"model", "table"});
     if (const Json* m = find(v, "model")) job_.templateModel = input(*m, childPath(at, "model"));
     // The table is read when it exists and written otherwise, so it must not collide with any other file.
-    if (const Json* t = find(v, "table")) job_.templateFile = output(*t, childPath(at, "table"));
+    if (const Json* t = find(v, "table"))
+      job_.templateFile = output(*t, childPath(at, "table"), kTableExtensions, "table");
     if (job_.templateModel.empty() && job_.templateFile.empty()) {
       fail(at, "give model (the template mesh), table (its .topo file) or both");
     }

@@ -65,6 +65,7 @@ struct BatchJob {
 
 // Output extensions accepted for BatchVariant::contours and ::masks (lower case, with the dot).
 inline constexpr std::array<std::string_view, 3> kBatchContourExtensions = {".cli", ".3mf", ".svg"};
+inline constexpr std::array<std::string_view, 1> kTableExtensions = {".topo"};
 inline constexpr std::array<std::string_view, 3> kBatchMaskExtensions = {".sl1", ".exr", ".vdb"};
 
 // Reads and validates a job file; relative paths are resolved against the file's folder (made

@@ -21,6 +21,7 @@
 #include <nlohmann/json.hpp>
 
 #include "io/errors.h"
+#include "io/output_file.h"
 
 namespace toposlice::jobjson {
 
@@ -226,16 +227,20 @@ class JsonReader {
     return resolved.lexically_normal();
   }
 
+  // A path as the file it names: links in its folders resolved ("same/o.cli" with same -> . is
+  // "o.cli"), so two spellings of one file compare equal.
+  static std::string fileKey(const fs::path& p) { return resolvedPath(p).string(); }
+
   fs::path input(const Json& v, const std::string& jsonPath) {
     fs::path p = path(v, jsonPath);
-    inputs_.emplace(p.string(), jsonPath);
+    inputs_.emplace(fileKey(p), jsonPath);
     return p;
   }
 
   fs::path output(const Json& v, const std::string& jsonPath) {
     fs::path p = path(v, jsonPath);
     if (!p.has_filename()) fail(jsonPath, p.string() + " names a folder, not a file");
-    const auto [it, added] = outputs_.emplace(p.string(), jsonPath);
+    const auto [it, added] = outputs_.emplace(fileKey(p), jsonPath);
     if (!added) fail(jsonPath, p.string() + " is already written by " + it->second);
     return p;
   }
@@ -296,8 +301,8 @@ class JsonReader {
 
   fs::path baseDir_;
   std::string name_;
-  std::map<std::string, std::string> inputs_;   // normalised path -> JSON path of its first use
-  std::map<std::string, std::string> outputs_;  // normalised path -> JSON path
+  std::map<std::string, std::string> inputs_;   // fileKey -> JSON path of its first use
+  std::map<std::string, std::string> outputs_;  // fileKey -> JSON path
 };
 
 }  // namespace toposlice::jobjson

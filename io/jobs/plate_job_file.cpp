@@ -9,6 +9,8 @@ using namespace jobjson;
 
 constexpr std::array<std::string_view, 3> kMethods = {"sr", "sr-lazy", "cp"};
 constexpr std::array<std::string_view, 3> kContourExtensions = {".cli", ".svg", ".3mf"};
+constexpr std::array<std::string_view, 1> kReportExtensions = {".json"};
+constexpr std::array<std::string_view, 1> kPictureExtensions = {".png"};
 
 class PlateParser : public JsonReader {
  public:
@@ -149,9 +151,10 @@ class PlateParser : public JsonReader {
         job_.contours.push_back(
             output((*x)[i], indexPath(key("contours"), i), kContourExtensions, "contour"));
     }
-    if (const Json* x = find(v, "report")) job_.report = output(*x, key("report"));
+    if (const Json* x = find(v, "report"))
+      job_.report = output(*x, key("report"), kReportExtensions, "report");
     if (const Json* x = find(v, "picture")) {
-      job_.picture = output(*x, key("picture"));
+      job_.picture = output(*x, key("picture"), kPictureExtensions, "picture");
       if (job_.masks.empty())
         fail(key("picture"), "the picture is drawn from the masks: give outputs.masks too");
     }
