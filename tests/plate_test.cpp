@@ -514,21 +514,23 @@ TEST_F(PlateTest, BundledExampleIsFreshAndTheDemoJobRuns) {
   for (const auto& e : fs::directory_iterator(dir_ / "fresh"))
     EXPECT_EQ(readBytes(e.path()), readBytes(examples / "plate" / e.path().filename()))
         << e.path().filename() << " differs from a fresh one: run generate_plate_example examples/plate";
-  const tool_test::RunResult r = run({"plate", (examples / "plate_demo.json").string(), "-O", dir_.string()});
+  // As the README runs it: -O names a folder that does not exist yet.
+  const fs::path out = dir_ / "out";
+  const tool_test::RunResult r = run({"plate", (examples / "plate_demo.json").string(), "-O", out.string()});
   ASSERT_EQ(r.code(), 0) << r.describe();
   EXPECT_NE(r.out.find("1 plate, 3 parts (3 checked against a template, 0 built)"), std::string::npos)
       << r.out;
   for (const char* f :
        {"plate_demo.sl1", "plate_demo.cli", "plate_demo.svg", "plate_demo.png", "plate_demo_report.json"})
-    EXPECT_TRUE(fs::exists(dir_ / f)) << f;
-  const std::string report = readBytes(dir_ / "plate_demo_report.json");
+    EXPECT_TRUE(fs::exists(out / f)) << f;
+  const std::string report = readBytes(out / "plate_demo_report.json");
   EXPECT_NE(report.find("\"name\": \"named\""), std::string::npos);
   // Every part starts on the first layer: nothing in the example floats.
   EXPECT_EQ(report.find("\"first_layer\": 1"), std::string::npos) << report;
-  const std::string cli = readBytes(dir_ / "plate_demo.cli");
+  const std::string cli = readBytes(out / "plate_demo.cli");
   EXPECT_NE(cli.find("$$LABEL/4,add named_arch_named_label"), std::string::npos);
   // The printer file's previews show the plate, as PrusaSlicer names them.
-  const auto entries = tool_test::zipEntryNames(readBytes(dir_ / "plate_demo.sl1"));
+  const auto entries = tool_test::zipEntryNames(readBytes(out / "plate_demo.sl1"));
   for (const char* thumbnail : {"thumbnail/thumbnail400x400.png", "thumbnail/thumbnail800x480.png"})
     EXPECT_NE(std::find(entries.begin(), entries.end(), thumbnail), entries.end()) << thumbnail;
 }

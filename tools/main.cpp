@@ -495,7 +495,7 @@ int run(int argc, char** argv) {
   plate->add_option("job", plateJobPath, "Plate job (JSON, see docs/FORMATS.md)")->required();
   std::string plateOutputDir;
   plate->add_option("-O,--output-dir", plateOutputDir,
-                    "Write every output into this folder (file names as in the job)");
+                    "Write every output into this folder, made when missing (file names as in the job)");
   bool plateExplain = false;
   plate->add_flag("--explain", plateExplain,
                   "Print the printer, material and correction settings the job would use, then stop");

@@ -751,6 +751,13 @@ PlateJob readPlateCommandJob(const std::filesystem::path& jobPath, const std::fi
 int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
                     const std::filesystem::path& outputDir) {
   const PlateJob job = readPlateCommandJob(jobPath, outputDir);
+  // The folder the user named for the outputs is made when missing (as `plate job.json -O out` in the
+  // README); the job's own output paths are used as given.
+  if (!outputDir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(outputDir, ec);
+    if (ec) throw OutputError(outputDir.string() + ": cannot create the output folder: " + ec.message());
+  }
   ThreadLimit threads(job.threads);
   const PlateResult r = runPlateJob(job, nullptr);
   if (!quiet) printPlateSummary(stdout, r);
