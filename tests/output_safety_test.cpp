@@ -413,6 +413,34 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
   EXPECT_TRUE(entries(dir_).empty());
 }
 
+// --explain refuses what the run would refuse (it approved a light map without anti-aliasing, which the
+// run then refused), and the option checks of the run apply to it.
+TEST_F(OptionChecks, ExplainRefusesWhatTheRunRefuses) {
+  MaskImage light;
+  light.width = 1440;
+  light.height = 2560;
+  light.pixels.assign(std::size_t{1440} * 2560, uint8_t{220});
+  std::vector<uint8_t> png;
+  encodeMaskPng(light, png);
+  writeBytes(path("light.png"), std::string(png.begin(), png.end()));
+  writeBytes(path("lab.json"), R"({"printers": {"lab": {"inherits": "sl1", "light_map": "light.png"}}})");
+  const std::vector<std::vector<std::string>> cases{
+      {"--profile", "lab.json", "--printer", "lab", "--masks", "part.sl1", "--explain"},
+      {"-o", "a.cli", "--printer", "sl1", "--explain"},
+  };
+  for (const auto& args : cases) {
+    std::vector<std::string> all{"slice", examplePart().string(), "-H", "0.5"};
+    all.insert(all.end(), args.begin(), args.end());
+    const RunResult explained = run(all);
+    expectOneErrorLine(explained);
+    all.pop_back();
+    const RunResult ran = run(all);
+    expectOneErrorLine(ran);
+    EXPECT_EQ(explained.err, ran.err);
+  }
+  EXPECT_FALSE(fs::exists(path("part.sl1")));
+}
+
 TEST_F(OptionChecks, UnknownMaskExtensionListsTheKnownOnes) {
   const RunResult r = run({"slice", examplePart().string(), "--masks", "layers.zip", "--printer", "sl1"});
   expectOneErrorLine(r);

@@ -30,6 +30,7 @@
 #include "tools/plate_job.h"
 #include "tools/progress_bar.h"
 #include "tools/slice_job.h"
+#include "tools/slice_stages.h"
 
 namespace toposlice {
 namespace {
@@ -257,6 +258,7 @@ void explainPrintSettings(const PrintSettings& p, const std::filesystem::path& m
 
 // slice --explain: nothing is read or written.
 int explainSettings(const std::string& model, const SliceJobOptions& options) {
+  validateSliceOptions(options);  // what the run would refuse, --explain refuses too
   std::printf("model      : %s\n", model.c_str());
   explainPrintSettings(options.print, options.masks.output, options.masks.antialias,
                        "the bounding-box centre in x and y and the lowest z");
@@ -272,7 +274,10 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
   const std::string masks = withMasks == 0 ? std::string()
                                            : "each variant's (" + std::to_string(withMasks) + " of " +
                                                  std::to_string(job.variants.size()) + " variants)";
-  explainPrintSettings(batchJobSettings(job), masks, job.antialias,
+  const PrintSettings print = batchJobSettings(job);
+  for (const BatchVariant& v : job.variants)
+    checkMaskSettings(print, job.antialias, !v.masks.empty(), "antialias");
+  explainPrintSettings(print, masks, job.antialias,
                        "each variant's bounding-box centre in x and y and its lowest z");
   return 0;
 }
@@ -280,8 +285,10 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
 // plate --explain: the job file and its profile are read and checked, no model.
 int explainPlateSettings(const std::filesystem::path& jobPath, const std::filesystem::path& outputDir) {
   const PlateJob job = readPlateCommandJob(jobPath, outputDir);
+  const PrintSettings print = plateJobSettings(job);
+  checkMaskSettings(print, job.antialias, !job.masks.empty(), "settings.antialias");
   std::printf("plate job  : %s (%zu parts)\n", jobPath.c_str(), job.parts.size());
-  explainPrintSettings(plateJobSettings(job), job.masks, job.antialias,
+  explainPrintSettings(print, job.masks, job.antialias,
                        "each part's own centre (its model's bounding box in x and y, lowest z), along the "
                        "plate's axes");
   return 0;
@@ -624,7 +631,6 @@ int run(int argc, char** argv) {
       choice.overrides.emplace_back(assignment.substr(0, eq), assignment.substr(eq + 1));
     }
     options.print = resolvePrintSettings(choice);
-    if (explain) return explainSettings(model, options);
     const PrintSettings& print = options.print;
     needs(slice->count("--printer") > 0,
           masks || print.scales() || print.absoluteCorrection != 0 || print.elefantFootCompensation > 0,
@@ -642,6 +648,7 @@ int run(int argc, char** argv) {
     options.rebuildOnMismatch = onMismatch == "rebuild";
     options.templateFile = templatePath;
     options.otherInputs = {profilePath, options.print.lightMap};  // never replaced by an output either
+    if (explain) return explainSettings(model, options);
     return runSlice(model, options, common);
   };
   try {
