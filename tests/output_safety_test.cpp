@@ -378,6 +378,13 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
       {{"--z", "1,2,1e400"}, "1e400"},
       {{"--layer-height", "inf"}, "layer height"},
       {{"--masks", "m.sl1", "--printer", "sl1", "--pixel", "-0.1"}, "--pixel"},
+      // 2^32 + 1 wrapped to 1 (a 1 x 10 image) before.
+      {{"--masks", "m.sl1", "--printer", "sl1", "--resolution", "4294967297x10"}, "--resolution"},
+      {{"--masks", "m.sl1", "--printer", "sl1", "--resolution", "-5x10"}, "--resolution"},
+      // An empty value is a mistake, not the option left out (these ran with the defaults before).
+      {{"--z", ""}, "--z"},
+      {{"--masks", ""}, "--masks"},
+      {{"--summary", ""}, "--summary"},
   };
   for (const auto& [args, named] : cases) {
     std::vector<std::string> all{"slice", examplePart().string(), "-o", "a.cli"};
@@ -387,6 +394,11 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
     EXPECT_TRUE(contains(r.err, named)) << testing::PrintToString(args) << "\n" << r.err;
     EXPECT_FALSE(fs::exists(path("a.cli")));
   }
+  const RunResult wrapped =
+      run({"preview", examplePart().string(), "-o", "p.png", "--size", "4294967297x10", "-q"});
+  EXPECT_NE(wrapped.code(), 0) << wrapped.describe();
+  EXPECT_TRUE(contains(wrapped.err, "--size")) << wrapped.err;
+  EXPECT_FALSE(fs::exists(path("p.png")));
 }
 
 TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {

@@ -257,6 +257,25 @@ void explainPrintSettings(const PrintSettings& p, const std::filesystem::path& m
 }
 
 // slice --explain: nothing is read or written.
+// "WxH" in pixels, each 1 to `max`: digits only, so "4294967297x10" is out of range, not 1x10.
+bool parsePixelSize(const std::string& text, uint64_t max, uint32_t& width, uint32_t& height) {
+  const std::size_t x = text.find('x');
+  if (x == std::string::npos) return false;
+  const auto number = [max](std::string_view digits, uint32_t& out) {
+    if (digits.empty() || digits.size() > 9) return false;
+    uint64_t v = 0;
+    for (const char c : digits) {
+      if (c < '0' || c > '9') return false;
+      v = v * 10 + static_cast<uint64_t>(c - '0');
+    }
+    if (v == 0 || v > max) return false;
+    out = static_cast<uint32_t>(v);
+    return true;
+  };
+  const std::string_view all(text);
+  return number(all.substr(0, x), width) && number(all.substr(x + 1), height);
+}
+
 int explainSettings(const std::string& model, const SliceJobOptions& options) {
   validateSliceOptions(options);  // what the run would refuse, --explain refuses too
   std::printf("model      : %s\n", model.c_str());
@@ -345,9 +364,7 @@ int runTemplate(const std::string& model, const MeshReadOptions& read, const std
 int runPreview(const std::string& model, const MeshReadOptions& read, const std::string& output,
                const std::string& size, bool force, bool quiet) {
   uint32_t width = 0, height = 0;
-  char tail = 0;
-  if (std::sscanf(size.c_str(), "%ux%u%c", &width, &height, &tail) != 2 || width == 0 || height == 0 ||
-      width > 8192 || height > 8192)
+  if (!parsePixelSize(size, 8192, width, height))
     throw InputError("--size " + size + ": expected WIDTHxHEIGHT in pixels, each 1 to 8192 (e.g. 800x480)");
   checkNotAnInput(output, {model});
   if (lowerExtension(output) != ".png")
@@ -533,6 +550,12 @@ int run(int argc, char** argv) {
 
   try {
     app.parse(argc, argv);
+    // An option given an empty value (--masks "", --z "") is a mistake, not the option left out.
+    for (const CLI::App* c : app.get_subcommands())
+      for (const CLI::Option* o : c->get_options())
+        if (o->count() > 0 && o->get_type_size() != 0)
+          for (const std::string& value : o->results())
+            if (value.empty()) throw CLI::ValidationError(o->get_name(), "an empty value: expected one");
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {
@@ -608,10 +631,10 @@ int run(int argc, char** argv) {
     options.report = reportPath;
     options.summary = summaryPath;
     if (!resolution.empty()) {
-      unsigned w = 0, h = 0;
-      char extra = 0;
-      if (std::sscanf(resolution.c_str(), "%ux%u%c", &w, &h, &extra) != 2 || w == 0 || h == 0)
-        throw InputError("--resolution '" + resolution + "': expected WxH, e.g. 2560x1440");
+      uint32_t w = 0, h = 0;
+      if (!parsePixelSize(resolution, 100000, w, h))
+        throw InputError("--resolution '" + resolution +
+                         "': expected WxH in pixels, each 1 to 100000, e.g. 2560x1440");
       options.masks.resolution = std::pair<uint32_t, uint32_t>{w, h};
     }
     if (!origin.empty()) {
