@@ -131,9 +131,29 @@ TEST_F(OutputSafety, FailingBatchVariantLeavesNoneOfItsOutputs) {
                  ", \"contours\": \"a.cli\", \"masks\": \"a.sl1\", \"report\": \"a.csv\"}]}");
   setFileSizeLimit(600 * 1024);
   const RunResult r = run({"batch", "job.json", "-q"});
-  EXPECT_EQ(r.code(), 1) << r.describe();
-  EXPECT_TRUE(contains(r.err, "failed")) << r.describe();
+  // One error line naming the variant and what failed (the summary table is not printed with -q).
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "variant 'a'") && contains(r.err, "cannot write")) << r.describe();
   EXPECT_EQ(entries(dir_), std::vector<std::string>{"job.json"});
+  // Without -q the table says "failed" on stdout, and the error line is on stderr all the same.
+  const RunResult loud = run({"batch", "job.json"});
+  EXPECT_EQ(loud.code(), 1) << loud.describe();
+  EXPECT_TRUE(contains(loud.out, "failed")) << loud.describe();
+  EXPECT_TRUE(contains(loud.err, "toposlice: error: variant 'a'")) << loud.describe();
+}
+
+// Warnings of a variant's slice job (an inside-out mesh, layers outside the model) reach the user as
+// they do from slice, even with -q.
+TEST_F(OutputSafety, BatchShowsEachVariantsWarningsEvenWhenQuiet) {
+  writeBytes(path("inv.stl"), boxStl(5, 0, true));
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": \"inv.stl\"}, \"settings\": {\"layer_height\": 0.5, \"z0\": -3},"
+             " \"variants\": [{\"name\": \"a\", \"model\": \"inv.stl\", \"contours\": \"o.cli\"}]}");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  EXPECT_EQ(r.code(), 0) << r.describe();
+  EXPECT_TRUE(contains(r.err, "toposlice: warning: variant 'a'")) << r.describe();
+  EXPECT_TRUE(contains(r.err, "inside out")) << r.describe();
+  EXPECT_TRUE(contains(r.err, "outside the model's height")) << r.describe();
 }
 
 // ---------------------------------------------------------------------------------------------------

@@ -97,8 +97,16 @@ int runBatch(const std::filesystem::path& jobPath, const BatchRunOptions& option
 
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const BatchTotals totals = batchTotals(outcomes);
-  if (!options.quiet || totals.failed > 0)
-    printBatchSummary(options.quiet ? stderr : stdout, job, tmpl, outcomes, total, false);
+  if (!options.quiet) printBatchSummary(stdout, job, tmpl, outcomes, total, false);
+  // Warnings (never hidden by --quiet) and one error line per failed variant, on stderr.
+  for (std::size_t i = 0; i < count; ++i) {
+    const BatchVariant& v = job.variants[i];
+    for (const std::string& w : outcomes[i].warnings)
+      std::fprintf(stderr, "toposlice: warning: variant '%s': %s\n", v.name.c_str(), w.c_str());
+    if (outcomes[i].status == "failed")
+      std::fprintf(stderr, "toposlice: error: variant '%s' (%s): %s\n", v.name.c_str(), v.model.c_str(),
+                   outcomes[i].detail.c_str());
+  }
   return totals.failed > 0 ? 1 : 0;
 }
 

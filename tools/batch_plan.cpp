@@ -128,6 +128,7 @@ BatchOutcome runBatchVariant(const BatchJob& job, const BatchVariant& variant, c
     outcome.status = "ok";
     outcome.layers = r.stats.layers;
     outcome.detail = r.topology;
+    outcome.warnings = r.warnings;
     if (resumed)
       outcome.detail += "; resumed: " + std::to_string(outputs.size() - existing) + " of " +
                         std::to_string(outputs.size()) + " outputs were missing, the others rewritten";

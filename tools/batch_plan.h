@@ -55,6 +55,7 @@ struct BatchOutcome {
   double seconds = 0;
   uint64_t layers = 0;
   int rank = -1;  // MPI rank that sliced it; -1: none (complete, or the single-machine runner)
+  std::vector<std::string> warnings;  // the slice job's warnings (an inside-out mesh, empty layers)
 };
 
 // The outcome of a variant whose outputs all exist.
