@@ -10,8 +10,10 @@
 #include <system_error>
 #include <utility>
 
+#include <dirent.h>
 #include <fcntl.h>
 #include <sys/statvfs.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include "io/errors.h"
@@ -25,6 +27,7 @@ namespace {
 constexpr std::size_t kSlotPathSize = 4096;
 struct PendingSlot {
   std::atomic<int> state{0};
+  bool folder = false;  // a staged folder of layer files: its files are removed, then the folder
   char path[kSlotPathSize];
 };
 static_assert(std::atomic<int>::is_always_lock_free, "the signal handler needs lock-free atomics");
@@ -75,11 +78,12 @@ bool isLayerFileName(const std::string& name, std::string_view ext) {
 
 }  // namespace
 
-int registerPendingOutput(const std::string& path) noexcept {
+int registerPendingOutput(const std::string& path, bool folder) noexcept {
   if (path.size() + 1 > kSlotPathSize) return -1;
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
     int expected = 0;
     if (gPending[i].state.compare_exchange_strong(expected, 1, std::memory_order_acquire)) {
+      gPending[i].folder = folder;
       std::memcpy(gPending[i].path, path.c_str(), path.size() + 1);
       gPending[i].state.store(2, std::memory_order_release);
       return static_cast<int>(i);
@@ -125,9 +129,44 @@ void checkOutputAllowed(const std::filesystem::path& path, bool overwrite, Outpu
   checkReplaceable(path, kind, layerExt);
 }
 
+namespace {
+
+// Removes the files of a staged folder (it holds nothing else), then the folder, with system calls only
+// (open, getdents64, unlinkat, close, rmdir): callable from a signal handler.
+void removeFolderFromHandler(const char* path) noexcept {
+  const int fd = ::open(path, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (fd >= 0) {
+    alignas(8) char entries[8192];
+    for (int pass = 0; pass < 1000; ++pass) {  // from the start again until a pass removes nothing
+      bool removed = false;
+      ::lseek(fd, 0, SEEK_SET);
+      for (;;) {
+        const long n = ::syscall(SYS_getdents64, fd, entries, sizeof entries);
+        if (n <= 0) break;
+        for (long at = 0; at < n;) {
+          const auto* e = reinterpret_cast<const struct dirent64*>(entries + at);
+          const char* name = e->d_name;
+          const bool dots = name[0] == '.' && (name[1] == '\0' || (name[1] == '.' && name[2] == '\0'));
+          if (!dots && ::unlinkat(fd, name, 0) == 0) removed = true;
+          at += e->d_reclen;
+        }
+      }
+      if (!removed) break;
+    }
+    ::close(fd);
+  }
+  ::rmdir(path);
+}
+
+}  // namespace
+
 void removePendingOutputs() noexcept {
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
-    if (gPending[i].state.load(std::memory_order_acquire) == 2) ::unlink(gPending[i].path);
+    if (gPending[i].state.load(std::memory_order_acquire) != 2) continue;
+    if (gPending[i].folder)
+      removeFolderFromHandler(gPending[i].path);
+    else
+      ::unlink(gPending[i].path);
   }
 }
 

@@ -204,7 +204,8 @@ class OutputTransaction {
 };
 
 // Registers a temporary path in the signal table (see above); returns the slot or -1. Releases one.
-int registerPendingOutput(const std::string& path) noexcept;
+// A folder's entry (folder = true) is a staged folder of files: the handler removes its files, then it.
+int registerPendingOutput(const std::string& path, bool folder = false) noexcept;
 void unregisterPendingOutput(int slot) noexcept;
 
 }  // namespace toposlice

@@ -38,10 +38,14 @@ StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite
   transaction_ = OutputTransaction::current();
   tempPath_ = siblingName(finalPath_, ".tmp-");
   if (::mkdir(tempPath_.c_str(), 0777) != 0) throw OutputError(cannotCreateMessage(finalPath_, errno));
+  std::error_code ec;
+  const std::filesystem::path absolute = std::filesystem::absolute(tempPath_, ec);
+  registrySlot_ = registerPendingOutput(ec ? tempPath_.string() : absolute.string(), /*folder=*/true);
 }
 
 StagedDirectory::~StagedDirectory() {
   if (committed_) return;
+  unregisterPendingOutput(registrySlot_);
   std::error_code ec;
   std::filesystem::remove_all(tempPath_, ec);
 }
@@ -49,10 +53,13 @@ StagedDirectory::~StagedDirectory() {
 void StagedDirectory::commit() {
   assert(!committed_);
   if (transaction_ != nullptr) {
-    transaction_->stage({tempPath_, finalPath_, overwrite_, OutputKind::LayerFolder, layerExt_, -1});
+    transaction_->stage(
+        {tempPath_, finalPath_, overwrite_, OutputKind::LayerFolder, layerExt_, registrySlot_});
     committed_ = true;
     return;
   }
+  unregisterPendingOutput(registrySlot_);  // renamed below, or removed by the destructor
+  registrySlot_ = -1;
   const std::string temp = tempPath_.string(), final = finalPath_.string();
   if (!overwrite_) {
     if (::renameat2(AT_FDCWD, temp.c_str(), AT_FDCWD, final.c_str(), RENAME_NOREPLACE) == 0) {

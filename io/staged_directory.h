@@ -15,9 +15,8 @@ namespace toposlice {
 // deleted); destroyed uncommitted, it is removed with everything in it. With overwrite, only a folder of
 // layer files (<anything><digits><layerExt>) is replaced: checkReplaceable (io/output_file.h) refuses any
 // other existing entry, when the directory is created and again at commit. Created while an
-// OutputTransaction is current, commit() hands the folder to it instead of renaming. It is not in
-// OutputFile's signal-handler table: a process killed by a second signal may leave the temporary
-// directory behind.
+// OutputTransaction is current, commit() hands the folder to it instead of renaming. It is in
+// OutputFile's signal-handler table: a second signal removes its files and the folder.
 class StagedDirectory {
  public:
   // layerExt: the extension of the layer files it holds (".png", ".exr").
@@ -40,6 +39,7 @@ class StagedDirectory {
   bool overwrite_;
   std::string layerExt_;
   class OutputTransaction* transaction_ = nullptr;
+  int registrySlot_ = -1;  // its entry in the signal handler's table (io/output_file.h)
   bool committed_ = false;
 };
 

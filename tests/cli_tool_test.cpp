@@ -1143,7 +1143,7 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
 // Starts a long slice, waits until an output temporary appears (at most 15 s) and holds bytes (at most
 // 1.5 s more), sends `signal`, and checks the run ended early and left nothing behind.
 void interruptAndCheck(CliToolBase& t, const std::vector<std::string>& args, int signal,
-                       const fs::path& output, RunResult& result) {
+                       const fs::path& output, RunResult& result, bool twice = false) {
   const auto begin = std::chrono::steady_clock::now();
   const pid_t pid = t.start(args);
   ASSERT_GT(pid, 0);
@@ -1178,6 +1178,10 @@ void interruptAndCheck(CliToolBase& t, const std::vector<std::string>& args, int
   }
   std::this_thread::sleep_for(100ms);
   ASSERT_EQ(::kill(pid, signal), 0) << std::strerror(errno);
+  if (twice) {  // a user pressing Ctrl-C again: the process stops at once, from the signal handler
+    std::this_thread::sleep_for(2ms);
+    ::kill(pid, signal);
+  }
   result = t.finish(pid, 30s);
   EXPECT_TRUE(result.signalled(signal) || (result.exited() && result.code() != 0)) << result.describe();
   EXPECT_LT(std::chrono::steady_clock::now() - begin, 20s) << "the run did not stop at the signal";
@@ -1200,6 +1204,17 @@ TEST_F(CliToolInterrupt, SigtermDuringPngFolderOutputLeavesNothing) {
                     {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001",
                      "--masks", "bigpng", "--printer", "sl1", "-q"},
                     SIGTERM, path("bigpng"), r);
+}
+
+// A second signal ends the run at once from the handler, which removes the staged folder of a PNG stack
+// (its files, then the folder) as it removes temporary files, and says so.
+TEST_F(CliToolInterrupt, SecondSigintDuringPngFolderOutputLeavesNothing) {
+  RunResult r;
+  interruptAndCheck(*this,
+                    {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001",
+                     "--masks", "bigpng", "--printer", "sl1", "-q"},
+                    SIGINT, path("bigpng"), r, /*twice=*/true);
+  EXPECT_TRUE(contains(r.err, "interrupted")) << r.describe();
 }
 
 TEST_F(CliToolInterrupt, SigintDuringBinaryCliOutputLeavesNothing) {

@@ -1,5 +1,6 @@
 // toposlice: the command-line program. Subcommands: info, slice, template, batch, preview, plate.
 // Every failure prints one line "toposlice: error: <reason>" to stderr and exits non-zero.
+#include <unistd.h>
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
@@ -47,6 +48,8 @@ const char* gInterruptedMessage = "interrupted; no output was left behind";
 extern "C" void onSignal(int signal) {
   if (gSignal != 0) {
     removePendingOutputs();
+    static const char kMessage[] = "toposlice: interrupted again: stopped at once; its temporaries removed\n";
+    [[maybe_unused]] const ssize_t written = ::write(STDERR_FILENO, kMessage, sizeof kMessage - 1);
     std::signal(signal, SIG_DFL);
     std::raise(signal);
     return;

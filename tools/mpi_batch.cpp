@@ -41,6 +41,7 @@
 // only; of failures while slicing, rank 0 reports the one of the lowest plate (where `toposlice plate`
 // would have stopped). Every rank exits with rank 0's status.
 #include <mpi.h>
+#include <unistd.h>
 
 #include <CLI/CLI.hpp>
 
@@ -171,6 +172,9 @@ int64_t receiveWork() {
 
 extern "C" void onSignal(int signal) {
   removePendingOutputs();
+  static const char kMessage[] =
+      "toposlice-mpi: interrupted: stopped at once; this rank's temporaries removed\n";
+  [[maybe_unused]] const ssize_t written = ::write(STDERR_FILENO, kMessage, sizeof kMessage - 1);
   std::signal(signal, SIG_DFL);
   std::raise(signal);
 }
