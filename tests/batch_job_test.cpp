@@ -26,7 +26,7 @@ Json fullJob() {
     "template": {"model": "models/template.stl", "table": "out/template.topo"},
     "settings": {
       "layer_height": 0.001, "layers": 14000, "z0": -3.5,
-      "method": "sr", "join_tolerance": 1e-5,
+      "method": "sr-lazy", "join_tolerance": 1e-5,
       "printer": "prusa-sl1s", "pixel": 0.05, "origin": [-60, -34], "resolution": [2560, 1440],
       "mirror": "x", "antialias": true, "threads": 8, "overwrite": true
     },
@@ -75,7 +75,7 @@ TEST(BatchJob, ParsesEveryField) {
   EXPECT_EQ(job.layers, 14000u);
   EXPECT_EQ(job.z0, -3.5);
   EXPECT_TRUE(job.explicitZ.empty());
-  EXPECT_EQ(job.method, "sr");
+  EXPECT_EQ(job.method, "sr-lazy");
   EXPECT_EQ(job.joinTolerance, 1e-5);
   EXPECT_EQ(job.printer, "prusa-sl1s");
   EXPECT_EQ(job.pixel, 0.05);
@@ -279,6 +279,26 @@ TEST(BatchJob, RejectsBadValues) {
               "between 1 and 4294967295");
   expectError([](Json& j) { j["settings"]["pixel"] = 0; }, "settings.pixel", "must be positive");
   expectError([](Json& j) { j["settings"]["join_tolerance"] = -1; }, "settings.join_tolerance", "negative");
+  // Settings that cannot apply: mask settings when no variant writes masks, binary CLI without .cli
+  // contours, a join tolerance for the default method, settings the masks' formats do not carry.
+  const auto contoursOnly = [](Json& j) {
+    j["variants"][0].erase("masks");
+    j["variants"].erase(1);
+  };
+  expectError([&](Json& j) { contoursOnly(j); }, "settings.printer", "does nothing in this job");
+  expectError(
+      [&](Json& j) {
+        contoursOnly(j);
+        for (const char* k : {"printer", "pixel", "origin", "resolution", "mirror"}) j["settings"].erase(k);
+      },
+      "settings.antialias", "needs a variant with masks");
+  expectError([](Json& j) { j["settings"]["method"] = "sr"; }, "settings.join_tolerance", "does nothing");
+  expectError(
+      [](Json& j) {
+        j["variants"].erase(1);  // only v1's .sl1 masks, which do not carry the lift speed (.exr would)
+        j["settings"]["print_settings"] = {{"lift_speed", 10}};
+      },
+      "settings.print_settings.lift_speed", "do not carry it");
   expectError([](Json& j) { j["settings"]["method"] = "marching"; }, "settings.method",
               "unknown slicing method \"marching\" (expected sr, sr-lazy or cp)");
   expectError([](Json& j) { j["settings"]["mirror"] = "z"; }, "settings.mirror", "expected none, x, y or xy");

@@ -433,6 +433,11 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
       {"-o", "a.cli", "--join-tolerance", "0.001"},
       {"-o", "a.cli", "--vdb-layout", "slabs"},
       {"--masks", "m.sl1", "--vdb-layout", "slabs", "--printer", "sl1"},
+      // Settings only a printer file carries, with a mask format that does not carry them.
+      {"--masks", "pngs", "--exposure-time", "5", "--printer", "sl1"},
+      {"--masks", "m.sl1", "--lift-speed", "10", "--printer", "sl1"},
+      {"--masks", "m.nanodlp", "--printer-model", "XYZ", "--printer", "sl1"},
+      {"--masks", "m.nanodlp", "--light-pwm", "100", "--printer", "sl1"},
   };
   for (const auto& args : cases) {
     std::vector<std::string> all{"slice", examplePart().string()};

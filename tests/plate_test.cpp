@@ -463,6 +463,31 @@ TEST_F(PlateTest, EveryPartThatCannotBeUsedIsNamedInOneError) {
 // Outputs that may not be written are refused before the work: the report and the first plate's files
 // before any part is read (a missing model would fail the read, so the refused report is what is
 // reported), a later plate's files once the arrangement has made that plate.
+// Settings that cannot apply to the plate job are errors naming the key, not silently ignored.
+TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
+  const std::string part =
+      "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {R"("settings": {"layer_height": 0.5, "antialias": true}, "outputs": {"contours": ["a.cli"]})",
+       "settings.antialias"},
+      {R"("settings": {"layer_height": 0.5, "cli_binary": true}, "outputs": {"contours": ["a.svg"]})",
+       "settings.cli_binary"},
+      {R"("settings": {"layer_height": 0.5, "allow_rebuild": true}, "outputs": {"masks": "m.sl1"})",
+       "settings.allow_rebuild"},
+      {R"("print_settings": {"exposure_time": 5}, "settings": {"layer_height": 0.5}, "outputs": {"masks": "pngs"})",
+       "print_settings.exposure_time"},
+  };
+  for (const auto& [rest, key] : cases) {
+    try {
+      runPlateJob(job("{\"printer\": \"sl1\", \"parts\": [" + part + "], " + rest + "}"), nullptr);
+      ADD_FAILURE() << "accepted: " << rest;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find(key + ": does nothing in this job"), std::string::npos)
+          << e.what();
+    }
+  }
+}
+
 TEST_F(PlateTest, ExistingOutputsAreRefusedBeforeTheSlicing) {
   tool_test::writeBytes(dir_ / "r.json", "{\"kept\": 1}\n");
   const std::string missing =

@@ -260,6 +260,12 @@ void explainPrintSettings(const PrintSettings& p, const std::filesystem::path& m
 }
 
 // slice --explain: nothing is read or written.
+// A setting's key as its command-line option spells it: exposure_time -> exposure-time.
+std::string dashed(std::string key) {
+  std::replace(key.begin(), key.end(), '_', '-');
+  return key;
+}
+
 // "WxH" in pixels, each 1 to `max`: digits only, so "4294967297x10" is out of range, not 1x10.
 bool parsePixelSize(const std::string& text, uint64_t max, uint32_t& width, uint32_t& height) {
   const std::size_t x = text.find('x');
@@ -662,12 +668,14 @@ int run(int argc, char** argv) {
           masks || print.scales() || print.absoluteCorrection != 0 || print.elefantFootCompensation > 0,
           "--printer", "mask output (--masks), or a printer whose corrections change the contours");
     // Settings given here that only the masks use do nothing without them.
+    const std::vector<std::filesystem::path> maskOutputs =
+        masks ? std::vector<std::filesystem::path>{options.masks.output}
+              : std::vector<std::filesystem::path>{};
     for (const auto& [key, value] : choice.overrides) {
       const std::string k = key;
-      const bool maskOnly = k.starts_with("display_") || k == "printer_model" || k == "gamma_correction" ||
-                            k == "light_map" || k == "exposure_time" || k == "initial_exposure_time" ||
-                            k == "faded_layers";
-      needs(maskOnly, masks, ("--" + k).c_str(), "mask output (--masks)");
+      if (const std::string why = settingUnusedReason(k, maskOutputs); !why.empty())
+        throw InputError("--" + dashed(k) +
+                         " does nothing in this job: " + (masks ? why : "it needs mask output (--masks)"));
       needs(k.starts_with("elefant_foot_") && k != "elefant_foot_compensation",
             options.print.elefantFootCompensation > 0, ("--" + k).c_str(), "elefant_foot_compensation > 0");
     }

@@ -15,6 +15,7 @@
 
 #include "io/errors.h"
 #include "io/jobs/json_reader.h"
+#include "io/jobs/profile.h"
 
 namespace toposlice {
 namespace {
@@ -43,6 +44,7 @@ class JobParser : public JsonReader {
     parseSettings(find(root, "settings"));
     parseVariants(require(root, "", "variants"));
     checkOutputs();
+    checkSettingsApply(root);
     return std::move(job_);
   }
 
@@ -128,6 +130,36 @@ class JobParser : public JsonReader {
     if (const Json* x = find(*v, "material")) job_.material = string(*x, key("material"));
     if (const Json* x = find(*v, "print_settings"))
       job_.printSettings = printSettings(*x, key("print_settings"));
+  }
+
+  // Settings that cannot apply to any variant are errors, not silently ignored (as on slice's command
+  // line): mask settings without a variant that writes masks, cli_binary without .cli contours, a join
+  // tolerance for the default method, printer-file settings no variant's mask format carries.
+  void checkSettingsApply(const Json& root) {
+    const Json* settings = find(root, "settings");
+    if (settings == nullptr) return;
+    std::vector<std::filesystem::path> masks;
+    bool anyCli = false;
+    for (const BatchVariant& v : job_.variants) {
+      if (!v.masks.empty()) masks.push_back(v.masks);
+      std::string ext = v.contours.extension().string();
+      for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      anyCli = anyCli || ext == ".cli";
+    }
+    const auto needs = [&](const char* k, bool applies, const char* what) {
+      if (find(*settings, k) != nullptr && !applies)
+        fail(childPath("settings", k), std::string("does nothing in this job: it needs ") + what);
+    };
+    for (const char* k : {"printer", "pixel", "origin", "resolution", "mirror", "antialias"})
+      needs(k, !masks.empty(), "a variant with masks");
+    needs("cli_binary", anyCli, "a variant with .cli contours");
+    needs("join_tolerance", !job_.method.empty() && job_.method != "sr",
+          "method cp or sr-lazy (the default sr joins segments through the adjacency table)");
+    for (const auto& [k, value] : job_.printSettings)
+      if (const std::string why = settingUnusedReason(k, masks); !why.empty())
+        fail(childPath(childPath("settings", "print_settings"), k),
+             "does nothing in this job: " +
+                 (masks.empty() ? std::string("it needs a variant with masks") : why));
   }
 
   void parseVariants(const Json& v) {

@@ -1,6 +1,7 @@
 #include "io/jobs/plate_job_file.h"
 
 #include "io/jobs/json_reader.h"
+#include "io/jobs/profile.h"
 
 namespace toposlice {
 namespace {
@@ -40,10 +41,41 @@ class PlateParser : public JsonReader {
     parseParts(require(root, "", "parts"));
     parseOutputs(object(require(root, "", "outputs"), "outputs"));
     checkOutputs();
+    checkSettingsApply(root);
     return std::move(job_);
   }
 
  private:
+  // Settings that cannot apply to this job are errors, not silently ignored (as on slice's command line).
+  void checkSettingsApply(const Json& root) {
+    std::vector<std::filesystem::path> masks;
+    if (!job_.masks.empty()) masks.push_back(job_.masks);
+    bool anyCli = false, anyTemplate = false, anyAuto = false;
+    for (const auto& c : job_.contours) {
+      std::string ext = c.extension().string();
+      for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+      anyCli = anyCli || ext == ".cli";
+    }
+    for (const PlatePart& p : job_.parts) {
+      anyTemplate = anyTemplate || !p.templateFile.empty();
+      anyAuto = anyAuto || !p.placement;
+    }
+    const auto needs = [&](const char* section, const char* k, bool applies, const char* what) {
+      const Json* s = find(root, section);
+      if (s != nullptr && find(*s, k) != nullptr && !applies)
+        fail(childPath(section, k), std::string("does nothing in this job: it needs ") + what);
+    };
+    needs("settings", "antialias", !masks.empty(), "outputs.masks");
+    needs("settings", "mirror", !masks.empty(), "outputs.masks");
+    needs("settings", "cli_binary", anyCli, "a .cli contour output");
+    needs("settings", "allow_rebuild", anyTemplate, "a part with a template");
+    needs("arrange", "rotation_step", anyAuto, "a part placed \"auto\"");
+    for (const auto& [k, value] : job_.printSettings)
+      if (const std::string why = settingUnusedReason(k, masks); !why.empty())
+        fail(childPath("print_settings", k),
+             "does nothing in this job: " + (masks.empty() ? std::string("it needs outputs.masks") : why));
+  }
+
   void parseSettings(const Json& v) {
     const std::string at = "settings";
     checkKeys(v, at,

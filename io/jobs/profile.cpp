@@ -318,6 +318,50 @@ std::string onlyEntry(const ProfileFile* file, const char* section) {
 
 }  // namespace
 
+namespace {
+
+bool maskFormatCarries(const std::string& ext, std::string_view key) {
+  static constexpr std::string_view kExposure[] = {"exposure_time", "initial_exposure_time", "faded_layers"};
+  static constexpr std::string_view kNanoDlpMotion[] = {"lift_distance", "lift_speed", "retract_speed",
+                                                        "wait_before_exposure"};
+  const auto in = [key](std::span<const std::string_view> list) {
+    return std::find(list.begin(), list.end(), key) != list.end();
+  };
+  if (ext == ".goo" || ext == ".exr" || ext == ".vdb") return true;
+  if (ext == ".sl1" || ext == ".sl1s") return key == "printer_model" || in(kExposure);
+  if (ext == ".nanodlp") return in(kExposure) || in(kNanoDlpMotion);
+  return false;  // a folder of PNGs carries no settings
+}
+
+}  // namespace
+
+std::string settingUnusedReason(std::string_view key, std::span<const std::filesystem::path> maskOutputs) {
+  static constexpr std::string_view kPrinterFileOnly[] = {
+      "printer_model",        "exposure_time",     "initial_exposure_time",
+      "faded_layers",         "lift_distance",     "lift_speed",
+      "bottom_lift_distance", "bottom_lift_speed", "retract_speed",
+      "wait_before_exposure", "light_pwm"};
+  const bool fileOnly =
+      std::find(std::begin(kPrinterFileOnly), std::end(kPrinterFileOnly), key) != std::end(kPrinterFileOnly);
+  const bool maskOnly =
+      fileOnly || key.starts_with("display_") || key == "gamma_correction" || key == "light_map";
+  if (!maskOnly) return "";
+  if (maskOutputs.empty()) return "it needs mask output";
+  if (!fileOnly) return "";
+  std::string formats;
+  for (const auto& path : maskOutputs) {
+    std::string ext = path.extension().string();
+    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    if (maskFormatCarries(ext, key)) return "";
+    const std::string name = ext.empty() ? "a folder of PNGs" : ext;
+    if (formats.find(name) == std::string::npos) formats += (formats.empty() ? "" : ", ") + name;
+  }
+  std::string carriers;
+  for (const char* ext : {".sl1", ".goo", ".nanodlp", ".exr", ".vdb"})
+    if (maskFormatCarries(ext, key)) carriers += (carriers.empty() ? "" : ", ") + std::string(ext);
+  return "the masks (" + formats + ") do not carry it; " + carriers + " masks do";
+}
+
 std::span<const SettingKey> settingKeys() {
   return kKeys;
 }
