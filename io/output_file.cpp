@@ -118,8 +118,16 @@ std::filesystem::path resolvedPath(const std::filesystem::path& path) {
   return ec ? std::filesystem::absolute(path).lexically_normal() : resolved;
 }
 
+namespace {
+std::string gOverwriteHint = "use --force to overwrite";
+}  // namespace
+
+void setOverwriteHint(std::string hint) {
+  gOverwriteHint = std::move(hint);
+}
+
 std::string outputExistsMessage(const std::filesystem::path& p) {
-  return p.string() + ": already exists (use --force to overwrite)";
+  return p.string() + ": already exists (" + gOverwriteHint + ")";
 }
 
 void checkOutputAllowed(const std::filesystem::path& path, bool overwrite, OutputKind kind,

@@ -510,6 +510,33 @@ TEST_F(Messages, MissingOutputFolderIsNamedNotTheTemporary) {
   EXPECT_FALSE(contains(r.err, ".tmp-")) << r.err;
 }
 
+// A folder of masks given with a trailing slash is that folder (its temporary went inside it, in a
+// folder that did not exist); a profile that inherits an unknown name names the file and the key; a
+// JSON job's existing output says how to replace it there (it has no --force).
+TEST_F(Messages, FolderSlashInheritsAndJsonOverwriteHints) {
+  RunResult r =
+      run({"slice", examplePart().string(), "-H", "1", "--printer", "sl1", "--masks", "pngs/", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_EQ(entries(path("pngs")).size(), 7u);
+  expectNoTemporaries();
+
+  writeBytes(path("p.json"), R"({"printers": {"lab": {"inherits": "nope"}}})");
+  r = run({"slice", examplePart().string(), "-H", "1", "--profile", "p.json", "--printer", "lab", "--masks",
+           "m.sl1"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "p.json: printers.lab.inherits: unknown printer 'nope'")) << r.err;
+
+  writeBytes(path("r.json"), "{\n  \"toposlice\": \"an earlier run\"}\n");
+  writeBytes(path("job.json"),
+             "{\"printer\": \"sl1\", \"settings\": {\"layer_height\": 1}, \"parts\": [{\"name\": "
+             "\"a\", \"model\": " +
+                 nlohmann::json(examplePart().string()).dump() +
+                 ", \"placement\": \"auto\"}], \"outputs\": {\"report\": \"r.json\"}}");
+  r = run({"plate", "job.json"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "r.json: already exists (set \"overwrite\": true")) << r.err;
+}
+
 TEST_F(Messages, ModelTooLargeSaysWhichEdges) {
   const RunResult r =
       run({"slice", examplePart().string(), "--masks", "m", "--resolution", "100x100", "--pixel", "0.1"});

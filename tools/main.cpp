@@ -589,6 +589,7 @@ int run(int argc, char** argv) {
   // write fails with EFBIG instead and the job ends as on a full disk, leaving nothing behind.
   std::signal(SIGXFSZ, SIG_IGN);
   auto runCommand = [&]() -> int {
+    if (*plate || *batch) setOverwriteHint("set \"overwrite\": true in the job's settings to replace it");
     if (*info) return runInfo(model, meshReadOptions(common));
     if (*preview)
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
@@ -639,6 +640,12 @@ int run(int argc, char** argv) {
     for (const auto& f : removeFeatures) options.remove.emplace_back(f);
     options.report = reportPath;
     options.summary = summaryPath;
+    // A folder of masks given as "pngs/" or ".": the folder itself (its temporary goes beside it, not
+    // inside it as "pngs/.tmp-..." or "..tmp-...").
+    std::filesystem::path& maskPath = options.masks.output;
+    while (!maskPath.empty() && maskPath.filename().empty() && maskPath != maskPath.root_path())
+      maskPath = maskPath.parent_path();
+    if (maskPath.filename() == "." || maskPath.filename() == "..") maskPath = resolvedPath(maskPath);
     if (!resolution.empty()) {
       uint32_t w = 0, h = 0;
       if (!parsePixelSize(resolution, 100000, w, h))

@@ -265,7 +265,14 @@ void applyProfile(PrintSettings& settings, const ProfileFile* file, SettingOwner
     if (profile->contains("inherits")) {
       const Json& parent = (*profile)["inherits"];
       if (!parent.is_string()) throw InputError(where + ".inherits: expected a profile name");
-      applyProfile(settings, file, owner, parent.get<std::string>(), depth + 1);
+      try {
+        applyProfile(settings, file, owner, parent.get<std::string>(), depth + 1);
+      } catch (const InputError& e) {
+        // A built-in name that does not exist says so without the file: name where it was asked for.
+        const std::string message = e.what();
+        if (message.starts_with(file->path.string() + ": ")) throw;
+        throw InputError(where + ".inherits: " + message);
+      }
     }
     const std::string origin = "profile " + file->path.filename().string() + " " + what + " " + name;
     for (const auto& [key, value] : profile->items()) {
