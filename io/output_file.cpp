@@ -12,6 +12,7 @@
 
 #include <dirent.h>
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <sys/statvfs.h>
 #include <sys/syscall.h>
 #include <unistd.h>
@@ -66,6 +67,25 @@ std::vector<std::string_view> signaturesFor(const std::string& ext) {
   if (ext == ".csv") return {"layer,z_mm,area_"sv};         // the per-layer report's header
   if (ext == ".json") return {"{\n  \"toposlice\": \""sv};  // summaries and plate reports: their first key
   return {};
+}
+
+// Whether the zip at `path` ends with toposlice's archive comment: its end record ("PK\5\6", 22 bytes)
+// with that comment's length, then the comment.
+bool endsWithOurZipComment(const std::filesystem::path& path) {
+  const std::size_t n = 22 + kZipComment.size();
+  char tail[22 + kZipComment.size()];
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  struct stat st {};
+  const bool read = ::fstat(fd, &st) == 0 && st.st_size >= static_cast<off_t>(n) &&
+                    ::pread(fd, tail, n, st.st_size - static_cast<off_t>(n)) == static_cast<ssize_t>(n);
+  ::close(fd);
+  if (!read) return false;
+  const std::string_view t(tail, n);
+  const auto commentSize =
+      static_cast<std::size_t>(static_cast<uint8_t>(t[20]) | static_cast<uint8_t>(t[21]) << 8);
+  return t.starts_with(std::string_view("PK\x05\x06", 4)) && commentSize == kZipComment.size() &&
+         t.substr(22) == kZipComment;
 }
 
 bool isLayerFileName(const std::string& name, std::string_view ext) {
@@ -365,7 +385,7 @@ void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::s
     ::close(fd);
     std::string_view start(head, n > 0 ? static_cast<std::size_t>(n) : 0);
     for (const std::string_view sig : signatures)
-      if (start.starts_with(sig)) return;
+      if (start.starts_with(sig) && (sig != "PK\x03\x04" || endsWithOurZipComment(path))) return;
     throw OutputError(path.string() + ": exists and is not a " + lowerExtension(path).substr(1) +
                       " file toposlice wrote (its first bytes differ); not replaced" + refused);
   }

@@ -123,12 +123,17 @@ std::string writeFailureReason(const std::filesystem::path& file, int savedErrno
 // are chosen by it.
 std::string lowerExtension(const std::filesystem::path& path);
 
+// The archive comment of every zip toposlice writes (SL1, NanoDLP, 3MF): how checkReplaceable tells
+// toposlice's archives from other programs' (a PrusaSlicer .sl1, a CAD .3mf), which start alike.
+inline constexpr std::string_view kZipComment = "written by toposlice";
+
 // What an output is, for the overwrite check.
 enum class OutputKind { File, LayerFolder };
 
 // Throws OutputError unless the existing entry at `path` may be replaced by a toposlice output of that
 // kind: a File output replaces a regular file (or a link) whose first bytes match the format of its
-// extension (.cli, .svg, .3mf, .sl1, .sl1s, .goo, .nanodlp, .vdb, .png, .topo; a .csv that starts with the
+// extension (.cli, .svg, .goo, .vdb, .png, .topo; a .3mf, .sl1, .sl1s or .nanodlp zip that also ends with
+// the comment kZipComment; a .csv that starts with the
 // per-layer report's header, a .json whose first key is "toposlice"), or any empty file; a file of any
 // other extension is never replaced (toposlice writes none); a LayerFolder output replaces a folder holding
 // only regular files named <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png",

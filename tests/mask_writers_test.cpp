@@ -27,6 +27,7 @@
 #include "io/masks/mask_sink.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
+#include "tests/fixtures/archives.h"
 #include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/tinyexr_read.h"
@@ -1373,7 +1374,11 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
       fs::create_directory(out);
       std::ofstream(out / (ext.empty() ? "old00000.png" : "old00000.exr")) << "old";
     } else {
-      std::ofstream(out) << (ext == ".vdb" ? " BDVold" : "PK\x03\x04old");
+      if (ext == ".vdb") {
+        std::ofstream(out) << " BDVold";
+      } else {
+        std::ofstream(out) << fixtures::zipToposliceWrote("old");
+      }
     }
   };
   for (size_t n = 0; n < std::size(kOutputs); ++n) {

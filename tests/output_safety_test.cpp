@@ -206,12 +206,19 @@ TEST_F(OutputSafety, ForceRefusesForeignJsonCsvAndOtherExtensions) {
   writeBytes(path("layers.csv"), "layer,owner\n1,me\n");
   writeBytes(path("x.dat"), "precious\n");
   writeBytes(path("x.jpg"), "JPEGDATA\n");
+  // Another program's archives start as ours do; they lack the comment toposlice puts in every zip.
+  const std::string prusa = std::string("PK\x03\x04", 4) + "a PrusaSlicer archive";
+  writeBytes(path("prusa.sl1"), prusa);
+  writeBytes(path("cad.3mf"), prusa);
   const std::string part = examplePart().string();
   const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
       {{"slice", part, "-H", "0.5", "--summary", "notes.json", "--force"}, "notes.json: exists and is not"},
       {{"slice", part, "-H", "0.5", "--report", "layers.csv", "--force"}, "layers.csv: exists and is not"},
       {{"template", part, "-o", "x.dat", "--force"}, "x.dat: the table is a .topo file"},
       {{"preview", part, "-o", "x.jpg", "--force"}, "x.jpg: the picture is a PNG"},
+      {{"slice", part, "-H", "0.5", "--printer", "sl1", "--masks", "prusa.sl1", "--force"},
+       "prusa.sl1: exists and is not"},
+      {{"slice", part, "-H", "0.5", "-o", "cad.3mf", "--force"}, "cad.3mf: exists and is not"},
   };
   for (const auto& [args, message] : cases) {
     const RunResult r = run(args);
@@ -222,12 +229,18 @@ TEST_F(OutputSafety, ForceRefusesForeignJsonCsvAndOtherExtensions) {
   EXPECT_EQ(readBytes(path("layers.csv")), "layer,owner\n1,me\n");
   EXPECT_EQ(readBytes(path("x.dat")), "precious\n");
   EXPECT_EQ(readBytes(path("x.jpg")), "JPEGDATA\n");
+  EXPECT_EQ(readBytes(path("prusa.sl1")), prusa);
+  EXPECT_EQ(readBytes(path("cad.3mf")), prusa);
   expectNoTemporaries();
 
-  // What toposlice wrote is replaced: a summary and a report of an earlier run.
-  ASSERT_EQ(run({"slice", part, "-H", "0.5", "--summary", "s.json", "--report", "r.csv"}).code(), 0);
-  const RunResult again =
-      run({"slice", part, "-H", "1", "--summary", "s.json", "--report", "r.csv", "--force"});
+  // What toposlice wrote is replaced: a summary, a report and archives of an earlier run.
+  const std::vector<std::string> outputs{"--summary", "s.json",  "--report", "r.csv", "--printer",
+                                         "sl1",       "--masks", "m.sl1",    "-o",    "c.3mf"};
+  std::vector<std::string> first{"slice", part, "-H", "0.5"}, second{"slice", part, "-H", "1", "--force"};
+  first.insert(first.end(), outputs.begin(), outputs.end());
+  second.insert(second.end(), outputs.begin(), outputs.end());
+  ASSERT_EQ(run(first).code(), 0);
+  const RunResult again = run(second);
   ASSERT_EQ(again.code(), 0) << again.describe();
   EXPECT_TRUE(contains(readBytes(path("r.csv")), "\n6,")) << "7 layers at 1 mm";
   expectNoTemporaries();

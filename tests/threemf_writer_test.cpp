@@ -25,6 +25,7 @@
 #include "io/errors.h"
 #include "io/readers/lib3mf_handle.h"
 #include "io/readers/stl_writer.h"
+#include "tests/fixtures/archives.h"
 #include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/fixtures/winding.h"
@@ -754,15 +755,23 @@ TEST(ThreeMfWriter, NothingUnderFinalNameBeforeFinish) {
 TEST(ThreeMfWriter, ExistingFileNeedsOverwrite) {
   ScratchDir dir;
   const fs::path out = dir / "old.3mf";
-  std::ofstream(out) << "PK\x03\x04 an older 3MF";
+  const std::string older = fixtures::zipToposliceWrote(" an older 3MF");
+  std::ofstream(out) << older;
   const FacetSoup box = boxSoup(0.3f);
   EXPECT_THROW(makeThreeMfWriter(out, boxJob(1, 0.3f), &box, false, 0.3), OutputError);
-  EXPECT_EQ(readFile(out), "PK\x03\x04 an older 3MF");
+  EXPECT_EQ(readFile(out), older);
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"old.3mf"});
+
+  // Another program's 3MF (a zip without our comment, a user's CAD model) is never replaced.
+  const fs::path cad = dir / "cad.3mf";
+  std::ofstream(cad) << "PK\x03\x04 a CAD model's 3MF";
+  EXPECT_THROW(makeThreeMfWriter(cad, boxJob(1, 0.3f), &box, true, 0.3), OutputError);
+  EXPECT_EQ(readFile(cad), "PK\x03\x04 a CAD model's 3MF");
+  fs::remove(cad);
 
   auto sink = makeThreeMfWriter(out, boxJob(1, 0.3f), &box, true, 0.3);
   sink->writeLayer(0, squareWithHole(0.15));
-  EXPECT_EQ(readFile(out), "PK\x03\x04 an older 3MF");  // untouched until finish()
+  EXPECT_EQ(readFile(out), older);  // untouched until finish()
   sink->finish();
   const ReadModel m = readWithLib3mf(out);
   ASSERT_TRUE(m.ok) << std::hex << m.readError << " " << m.readMessage;

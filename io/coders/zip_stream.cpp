@@ -40,7 +40,8 @@ void addZip64EndRecords(const std::filesystem::path& file, uint64_t entries) {
   const int fd = ::open(file.c_str(), O_RDWR | O_CLOEXEC);
   if (fd < 0) fail("cannot reopen");
   struct stat st {};
-  uint8_t end[22 + 20];  // possible Zip64 locator, then the classic end record (no comment)
+  constexpr std::size_t kComment = kZipComment.size();
+  uint8_t end[20 + 22 + kComment];  // possible Zip64 locator, then the classic end record and our comment
   if (::fstat(fd, &st) != 0 || st.st_size < static_cast<off_t>(sizeof end) ||
       ::pread(fd, end, sizeof end, st.st_size - static_cast<off_t>(sizeof end)) !=
           static_cast<ssize_t>(sizeof end)) {
@@ -54,8 +55,8 @@ void addZip64EndRecords(const std::filesystem::path& file, uint64_t entries) {
     return;  // Zip64 records present
   }
   const uint64_t cdSize = getLE32(eocd + 12), cdOffset = getLE32(eocd + 16);
-  const uint64_t zip64At = static_cast<uint64_t>(st.st_size) - 22;
-  uint8_t tail[56 + 20 + 22] = {};
+  const uint64_t zip64At = static_cast<uint64_t>(st.st_size) - 22 - kComment;
+  uint8_t tail[56 + 20 + 22 + kComment] = {};
   uint8_t* z = tail;  // Zip64 end of central directory record
   putLE(z, 0x06064b50u, 4);
   putLE(z + 4, 56 - 12, 8);   // size of the rest of the record
@@ -75,6 +76,8 @@ void addZip64EndRecords(const std::filesystem::path& file, uint64_t entries) {
   putLE(e + 10, 0xFFFF, 2);
   putLE(e + 12, cdSize, 4);
   putLE(e + 16, cdOffset, 4);
+  putLE(e + 20, kComment, 2);
+  std::memcpy(e + 22, kZipComment.data(), kComment);
   if (::pwrite(fd, tail, sizeof tail, static_cast<off_t>(zip64At)) != static_cast<ssize_t>(sizeof tail)) {
     ::close(fd);
     fail("cannot write the Zip64 end record");
@@ -263,7 +266,8 @@ void ZipStream::add(const std::string& name, std::span<const uint8_t> data, std:
 }
 
 void ZipStream::close() {
-  const int rc = zipClose(static_cast<zipFile>(zip_), nullptr);
+  const std::string comment(kZipComment);  // how --force tells toposlice's archives from others'
+  const int rc = zipClose(static_cast<zipFile>(zip_), comment.c_str());
   zip_ = nullptr;
   if (rc != ZIP_OK) throw OutputError(file_.finalPath().string() + ": cannot write: " + errorText(rc));
   addZip64EndRecords(file_.tempPath(), entries_);

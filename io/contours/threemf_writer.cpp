@@ -152,9 +152,10 @@ void alignCentralVersions(const std::filesystem::path& file, const std::filesyst
     return ::pread(fd, buf, size, static_cast<off_t>(at)) == static_cast<ssize_t>(size);
   };
   struct stat st {};
-  if (::fstat(fd, &st) != 0 || st.st_size < 42) fail("stat");
-  const uint64_t size = static_cast<uint64_t>(st.st_size);
-  uint8_t eocd[22];  // minizip writes no archive comment: the end record closes the file
+  if (::fstat(fd, &st) != 0 || st.st_size < static_cast<off_t>(42 + kZipComment.size())) fail("stat");
+  // The end record, then toposlice's archive comment, close the file.
+  const uint64_t size = static_cast<uint64_t>(st.st_size) - kZipComment.size();
+  uint8_t eocd[22];
   if (!readAt(eocd, 22, size - 22) || getLE(eocd, 4) != 0x06054b50u) fail("end record");
   const uint64_t entries = getLE(eocd + 10, 2);
   uint64_t at = getLE(eocd + 16, 4);
@@ -305,7 +306,8 @@ class ThreeMfWriter final : public ContourSink {
     flushText();
     int rc = zipCloseFileInZip(zip_.get());
     if (rc != ZIP_OK) fail("cannot write 3D/3dmodel.model", rc);
-    rc = zipClose(zip_.release(), nullptr);
+    const std::string comment(kZipComment);  // how --force tells toposlice's archives from others'
+    rc = zipClose(zip_.release(), comment.c_str());
     if (rc != ZIP_OK) fail("cannot write", rc);
     alignCentralVersions(file_.tempPath(), file_.finalPath());
     file_.commit();
