@@ -216,7 +216,9 @@ check "plate, an output in the way: nothing else written, no temporaries" \
 rm -f "$plate_dir/out/p-plate2.svg"
 
 # Given placements that overlap: refused before slicing, reported once by 3 ranks, nothing written.
-sed 's/"placement": "auto"/"placement": {"x": 30, "y": 15}/' "$plate_dir/job.json" >"$plate_dir/overlap.json"
+# (No part is placed "auto" there, so arrange.rotation_step, which would do nothing, goes too.)
+sed -e 's/"placement": "auto"/"placement": {"x": 30, "y": 15}/' -e 's/, "rotation_step": 90//' \
+  "$plate_dir/job.json" >"$plate_dir/overlap.json"
 run_mpi 3 "$plate_dir/overlap.json" "$tmp/P_overlap.log" plate
 rc_p=$?
 check "plate, overlapping placements: 3 ranks exit 1, got $rc_p" test "$rc_p" -eq 1
