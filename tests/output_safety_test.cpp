@@ -55,6 +55,17 @@ std::string boxStl(double s, double z0, bool insideOut) {
   return stl;
 }
 
+// A uniform light-uniformity map for the SL1's display (1440 x 2560, portrait), as a PNG file's bytes.
+std::string sl1LightMapPng(uint8_t value) {
+  MaskImage light;
+  light.width = 1440;
+  light.height = 2560;
+  light.pixels.assign(std::size_t{1440} * 2560, value);
+  std::vector<uint8_t> png;
+  encodeMaskPng(light, png);
+  return std::string(png.begin(), png.end());
+}
+
 std::vector<std::string> entries(const fs::path& dir) {
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
@@ -301,13 +312,7 @@ TEST_F(OutputSafety, ProfilesLightMapsInFoldersAndLinkedSpellingsAreCaught) {
 
   // The light map, inside the folder that a PNG stack would replace (its name even looks like a layer's).
   fs::create_directory(path("lm"));
-  MaskImage light;
-  light.width = 1440;
-  light.height = 2560;
-  light.pixels.assign(std::size_t{1440} * 2560, uint8_t{200});
-  std::vector<uint8_t> png;
-  encodeMaskPng(light, png);
-  writeBytes(path("lm/uniformity1.png"), std::string(png.begin(), png.end()));
+  writeBytes(path("lm/uniformity1.png"), sl1LightMapPng(200));
   r = run({"slice", part, "-H", "0.5", "--printer", "sl1", "--antialias", "--light-map", "lm/uniformity1.png",
            "--masks", "lm", "--force"});
   expectOneErrorLine(r);
@@ -466,13 +471,7 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
 // --explain refuses what the run would refuse (it approved a light map without anti-aliasing, which the
 // run then refused), and the option checks of the run apply to it.
 TEST_F(OptionChecks, ExplainRefusesWhatTheRunRefuses) {
-  MaskImage light;
-  light.width = 1440;
-  light.height = 2560;
-  light.pixels.assign(std::size_t{1440} * 2560, uint8_t{220});
-  std::vector<uint8_t> png;
-  encodeMaskPng(light, png);
-  writeBytes(path("light.png"), std::string(png.begin(), png.end()));
+  writeBytes(path("light.png"), sl1LightMapPng(220));
   writeBytes(path("lab.json"), R"({"printers": {"lab": {"inherits": "sl1", "light_map": "light.png"}}})");
   const std::vector<std::vector<std::string>> cases{
       {"--profile", "lab.json", "--printer", "lab", "--masks", "part.sl1", "--explain"},
