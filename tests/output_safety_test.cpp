@@ -367,6 +367,27 @@ TEST_F(EmptyResults, NoLayersOrNoPlaneInTheModelIsAnError) {
   expectNoTemporaries();
 }
 
+// One layer is a job: --layers 1 has the model's height as its layer height (layer 0 is cut at
+// z0 + h / 2), its masks are lit (they were refused as "dark": the volume, area x a thickness of 0, was
+// the test) and the summary says so. One explicit plane has no thickness, which printer files need:
+// refused with masks, naming --z; its contours are fine.
+TEST_F(EmptyResults, OneLayerJobs) {
+  RunResult r = run({"slice", examplePart().string(), "--layers", "1", "--printer", "sl1", "--masks",
+                     "one.sl1", "--summary", "one.json", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  const nlohmann::json summary = nlohmann::json::parse(readBytes(path("one.json")));
+  EXPECT_NEAR(summary["layers"]["layer_height_mm"].get<double>(), 6.2, 1e-6) << summary.dump();
+  EXPECT_GT(summary["volume_ml"].get<double>(), 0.5) << summary.dump();
+
+  r = run({"slice", examplePart().string(), "--z", "1", "--printer", "sl1", "--masks", "z.sl1"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "--z 1: one explicit plane")) << r.err;
+  EXPECT_FALSE(fs::exists(path("z.sl1")));
+  r = run({"slice", examplePart().string(), "--z", "1", "-o", "z.cli", "-q"});
+  EXPECT_EQ(r.code(), 0) << r.describe();
+  expectNoTemporaries();
+}
+
 TEST_F(EmptyResults, InsideOutMeshWithMasksIsAnErrorAndAWarningWithContours) {
   writeBytes(path("inv.stl"), boxStl(5, 0, true));
   const RunResult masks =

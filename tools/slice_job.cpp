@@ -113,9 +113,18 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
 
 // Thickness of layer k: h for uniform planes; for an explicit list, half the distance between the
 // neighbouring planes (one-sided at the ends).
-double layerThickness(const std::vector<double>& planes, uint32_t k, const PlaneSpec& spec) {
-  if (spec.explicitZ.empty() && planes.size() >= 2) return planes[1] - planes[0];
-  if (planes.size() < 2) return spec.layerHeight.value_or(0.0);
+// The layer height of uniform planes (not an explicit list): as given, else the planes' spacing, else
+// (one plane, from a layer count) twice its height above z0, since layer 0 is cut at z0 + h / 2.
+static double uniformLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes, double zmin) {
+  if (spec.layerHeight) return *spec.layerHeight;
+  if (planes.size() >= 2) return planes[1] - planes[0];
+  return planes.empty() ? 0.0 : 2 * (planes[0] - spec.z0.value_or(zmin));
+}
+
+double layerThickness(const std::vector<double>& planes, uint32_t k, const PlaneSpec& spec, double zmin) {
+  if (spec.explicitZ.empty())
+    return planes.size() >= 2 ? planes[1] - planes[0] : uniformLayerHeight(spec, planes, zmin);
+  if (planes.size() < 2) return 0.0;  // one explicit plane: no thickness to infer
   const std::size_t lo = k == 0 ? 0 : k - 1, hi = std::min<std::size_t>(planes.size() - 1, k + 1);
   return (planes[hi] - planes[lo]) / static_cast<double>(hi - lo);
 }
@@ -123,8 +132,8 @@ double layerThickness(const std::vector<double>& planes, uint32_t k, const Plane
 // The layer height as the user gave it (0.01, not the difference of two planes, 0.009999999999999998),
 // so that printer files and the summary carry a value that reads back exactly; for an explicit list or a
 // layer count, the distance between the first two planes.
-double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes) {
-  if (spec.explicitZ.empty() && spec.layerHeight) return *spec.layerHeight;
+double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes, double zmin) {
+  if (spec.explicitZ.empty()) return uniformLayerHeight(spec, planes, zmin);
   return planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
 }
 
@@ -488,7 +497,7 @@ static void writeSliceSummary(OutputFile& file, const std::filesystem::path& mod
   j["layers"] = {{"count", r.stats.layers},
                  {"first_z_mm", planes.front()},
                  {"last_z_mm", planes.back()},
-                 {"layer_height_mm", nominalLayerHeight(options.planes, planes)}};
+                 {"layer_height_mm", nominalLayerHeight(options.planes, planes, r.bounds.min.z)}};
   j["contours"] = {
       {"segments", r.stats.segments}, {"loops", r.stats.loops}, {"open_polylines", r.stats.openPolylines}};
   j["defects"] = {{"boundary_edges", r.edges.boundary},
@@ -659,6 +668,11 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     planes = makePlanes(options.planes, result.bounds.min.z, result.bounds.max.z, error);
     if (!error.empty()) throw InputError(model.string() + ": " + error);
     checkPlanesCutModel(model, planes, result, features, options, result.warnings);
+    if (masks && planes.size() == 1 && !options.planes.explicitZ.empty())
+      throw InputError(
+          "--z " + formatNumber(planes[0]) +
+          ": one explicit plane gives its layer no thickness, which a printer file needs (its layer "
+          "height, the resin volume): give two planes or more, or --layers 1");
 
     job.name = model.stem().string();
     for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
@@ -685,7 +699,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
         extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
       }
       maskJob = makeMaskJob(options.masks, print, extent, job.name, planes);
-      maskJob.layerHeight = nominalLayerHeight(options.planes, planes);
+      maskJob.layerHeight = nominalLayerHeight(options.planes, planes, result.bounds.min.z);
       // Archive timestamps come from the model file, so the same input gives the same bytes.
       struct stat info {};
       if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
@@ -751,6 +765,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (LayerResult& r : s.layers) r.contourBytes.resize(encoding.size());
   }
   double volumeMm3 = 0;
+  double litArea = 0;  // summed over the layers: a job of one explicit plane has no volume, but an area
 
   LayerStages stages;
   // Per-layer area and islands feed the masks (the archive's resin volume) and the report; a contour-only
@@ -831,7 +846,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       }
     }
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
-    volumeMm3 += r.area * layerThickness(planes, k, options.planes);
+    volumeMm3 += r.area * layerThickness(planes, k, options.planes, result.bounds.min.z);
+    litArea += r.area;
   };
 
   start = std::chrono::steady_clock::now();
@@ -848,7 +864,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (result.stats.loops == 0 && result.stats.openPolylines == 0)
     throw InputError(model.string() + ": every one of the " + std::to_string(planes.size()) +
                      " layers is empty: nothing to write");
-  if (masks && !(volumeMm3 > 0))
+  if (masks && !(litArea > 0))
     throw InputError(model.string() + ": every mask layer is dark: nothing would print" +
                      (result.inverted && !result.flipped
                           ? " (the mesh is inside out: slice with --fix-orientation)"

@@ -43,7 +43,7 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
                                        IndexedMesh* welded = nullptr);
 
 // The layer height as given (see slice_job.cpp).
-double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes);
+double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes, double zmin);
 
 // The mask job for `extent` (grid, printer model, layer count). Throws InputError for a missing image
 // size or pixel, or an extent that does not fit (unless o.crop).
