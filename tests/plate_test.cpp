@@ -463,6 +463,30 @@ TEST_F(PlateTest, EveryPartThatCannotBeUsedIsNamedInOneError) {
 // Outputs that may not be written are refused before the work: the report and the first plate's files
 // before any part is read (a missing model would fail the read, so the refused report is what is
 // reported), a later plate's files once the arrangement has made that plate.
+// Two outputs that name one file once -O has put them in one folder are refused as one output given
+// twice (they said "already exists" of a file that did not exist); and a failed job run with -O takes
+// the folders -O made away again.
+TEST_F(PlateTest, CollidingOutputsAndAFailedJobsOutputFolder) {
+  const std::string part =
+      "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  tool_test::writeBytes(dir_ / "coll.json",
+                        "{\"printer\": \"sl1\", \"settings\": {\"layer_height\": 1}, \"parts\": [" + part +
+                            "], \"outputs\": {\"contours\": [\"x/c.cli\", \"y/c.cli\"]}}");
+  tool_test::RunResult r = run({"plate", (dir_ / "coll.json").string(), "-O", (dir_ / "oc").string()});
+  EXPECT_EQ(r.code(), 1) << r.describe();
+  EXPECT_NE(r.err.find("c.cli: given as more than one output"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(dir_ / "oc")) << "the folder -O made stays behind";
+
+  // Parts too large for the display: the job fails after -O made its folders.
+  tool_test::writeBytes(dir_ / "big.json",
+                        "{\"settings\": {\"layer_height\": 1, \"pixel\": 0.05, \"resolution\": [100, 100]},"
+                        " \"parts\": [" +
+                            part + "], \"outputs\": {\"masks\": \"m.sl1\"}}");
+  r = run({"plate", (dir_ / "big.json").string(), "-O", (dir_ / "o5" / "deep").string()});
+  EXPECT_EQ(r.code(), 1) << r.describe();
+  EXPECT_FALSE(fs::exists(dir_ / "o5")) << "the folders -O made stay behind";
+}
+
 // Settings that cannot apply to the plate job are errors naming the key, not silently ignored.
 TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
   const std::string part =

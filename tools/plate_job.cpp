@@ -58,6 +58,24 @@ void rotateSoup(FacetSoup& soup, double degrees) {
   }
 }
 
+// Two outputs of the job that name one file (two contour paths that -O puts in one folder, a given
+// "o/c-plate2.cli" beside "o/c.cli" on two plates): refused, as slice refuses an output given twice.
+void checkDistinctPlateOutputs(const PlateJob& job, uint32_t plates) {
+  std::map<std::filesystem::path, std::filesystem::path> seen;  // resolved -> as named
+  const auto add = [&](const std::filesystem::path& path) {
+    const auto [it, added] = seen.emplace(resolvedPath(path), path);
+    if (!added)
+      throw InputError(path.string() + ": given as more than one output" +
+                       (it->second == path ? "" : " (it is " + it->second.string() + ")"));
+  };
+  if (!job.report.empty()) add(job.report);
+  for (uint32_t plate = 0; plate < plates; ++plate)
+    for (const auto* p : {&job.masks, &job.picture})
+      if (!p->empty()) add(plateOutputPath(*p, plate));
+  for (uint32_t plate = 0; plate < plates; ++plate)
+    for (const auto& c : job.contours) add(plateOutputPath(c, plate));
+}
+
 // Outputs of plates [first, end) that may not be written (they exist and the job does not overwrite, or
 // they are not toposlice's to replace), refused before the slicing; the report with the first plate.
 void checkPlateOutputs(const PlateJob& job, uint32_t first, uint32_t end) {
@@ -514,6 +532,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   std::erase_if(inputs, [](const std::filesystem::path& p) { return p.empty(); });
   for (const auto& o : outputs)
     if (!o.empty()) checkNotAnInput(o, inputs);
+  checkDistinctPlateOutputs(job, 1);
   checkPlateOutputs(job, 0, 1);  // before anything is read; the other plates' once they are known
 
   // Read every part (and each distinct template table once), in parallel across parts.
@@ -617,6 +636,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   }
   result.arrangeSeconds = secondsSince(start);
   result.plates = arranged.plates;
+  checkDistinctPlateOutputs(job, result.plates);
   checkPlateOutputs(job, 1, result.plates);
   for (uint32_t p = 0; p < arranged.plates; ++p) result.density.push_back(arranged.density(p));
   result.layers.assign(result.plates, 0);
@@ -753,13 +773,29 @@ int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
   const PlateJob job = readPlateCommandJob(jobPath, outputDir);
   // The folder the user named for the outputs is made when missing (as `plate job.json -O out` in the
   // README); the job's own output paths are used as given.
+  // A failed job takes the folders it made away again (they hold nothing then).
+  std::filesystem::path made;  // the outermost folder this run creates
   if (!outputDir.empty()) {
+    for (std::filesystem::path p = std::filesystem::absolute(outputDir).lexically_normal();
+         !p.empty() && !outputPathExists(p) && p != p.parent_path(); p = p.parent_path())
+      made = p;
     std::error_code ec;
     std::filesystem::create_directories(outputDir, ec);
     if (ec) throw OutputError(outputDir.string() + ": cannot create the output folder: " + ec.message());
   }
   ThreadLimit threads(job.threads);
-  const PlateResult r = runPlateJob(job, nullptr);
+  PlateResult r;
+  try {
+    r = runPlateJob(job, nullptr);
+  } catch (...) {
+    std::error_code ec;
+    bool empty = !made.empty();
+    for (auto it = std::filesystem::recursive_directory_iterator(made, ec);
+         empty && !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
+      empty = it->is_directory();
+    if (empty) std::filesystem::remove_all(made, ec);
+    throw;
+  }
   if (!quiet) printPlateSummary(stdout, r);
   return 0;
 }
