@@ -388,6 +388,30 @@ TEST_F(EmptyResults, OneLayerJobs) {
   expectNoTemporaries();
 }
 
+// An inside-out feature counts with the opposite sign (an add-on cut the model away, silently): a
+// warning names it even with -q, and --fix-orientation flips it, as it flips the model.
+TEST_F(EmptyResults, InsideOutFeatureIsAWarningAndFlippedOnRequest) {
+  writeBytes(path("model.stl"), boxStl(10, 0, false));
+  writeBytes(path("inv.stl"), boxStl(4, 2, true));  // inside the model: as an add-on it changes nothing
+  const auto volume = [&](const std::string& tag, const std::string& extra) {
+    std::vector<std::string> args{"slice",     "model.stl",   "-H",         "1",     "--printer",
+                                  "sl1",       "--masks",     tag + ".sl1", "--add", "inv.stl",
+                                  "--summary", tag + ".json", "-q"};
+    if (!extra.empty()) args.push_back(extra);
+    const RunResult r = run(args);
+    EXPECT_EQ(r.code(), 0) << r.describe();
+    EXPECT_TRUE(contains(r.err, extra.empty()
+                                    ? "toposlice: warning: inv.stl: the add-on feature is inside out"
+                                    : "toposlice: warning: inv.stl: the add-on feature was inside out"))
+        << r.err;
+    return nlohmann::json::parse(readBytes(path(tag + ".json")))["volume_ml"].get<double>();
+  };
+  const double cut = volume("a", ""), whole = volume("b", "--fix-orientation");
+  EXPECT_NEAR(whole, 1.0, 0.02);        // the 10 mm cube, the add-on inside it (lit pixels)
+  EXPECT_NEAR(cut, 1.0 - 0.064, 0.02);  // the inside-out 4 mm cube cut away
+  EXPECT_GT(whole - cut, 0.05);
+}
+
 TEST_F(EmptyResults, InsideOutMeshWithMasksIsAnErrorAndAWarningWithContours) {
   writeBytes(path("inv.stl"), boxStl(5, 0, true));
   const RunResult masks =

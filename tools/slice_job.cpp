@@ -635,6 +635,23 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       std::swap(welded.facetVertices[c + 1], welded.facetVertices[c + 2]);
     result.flipped = true;
   }
+  // An inside-out feature counts with the opposite sign at the winding stage (an add-on would cut the
+  // model away, a removal add to it): flipped with --fix-orientation, else a warning naming it.
+  for (std::size_t i = 0; i < features.size(); ++i) {
+    if (!(measureSoup(features[i].corners).volume < 0)) continue;
+    const std::string role = i < options.add.size() ? "add-on" : "removal";
+    if (options.fixOrientation) {
+      for (std::size_t c = 0; c < features[i].corners.size(); c += 3)
+        std::swap(features[i].corners[c + 1], features[i].corners[c + 2]);
+      result.warnings.push_back(featurePaths[i].string() + ": the " + role +
+                                " feature was inside out (negative volume): flipped (--fix-orientation)");
+    } else {
+      result.warnings.push_back(
+          featurePaths[i].string() + ": the " + role +
+          " feature is inside out (negative volume), so it counts with the opposite sign; "
+          "slice with --fix-orientation to flip it");
+    }
+  }
 
   // The topology (weld and adjacency, or the template check) and the outputs' set-up (planes, files,
   // the printer files' thumbnails) need nothing of each other: they run side by side. A topology error
