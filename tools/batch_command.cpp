@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cstdio>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -77,7 +78,7 @@ int runBatch(const std::filesystem::path& jobPath, const BatchRunOptions& option
   const std::size_t inFlight = std::max<std::size_t>(
       1, std::min({count, std::size_t{ThreadLimit::available()}, kMaxVariantsInFlight}));
   std::vector<BatchOutcome> outcomes(count);
-  BatchProgress progress(count, options.quiet);
+  std::optional<BatchProgress> progress(std::in_place, count, options.quiet);
   orderedPipeline(
       count, inFlight,
       [&](std::size_t i, std::size_t) {
@@ -85,16 +86,17 @@ int runBatch(const std::filesystem::path& jobPath, const BatchRunOptions& option
         const BatchVariant& v = job.variants[i];
         if (batchVariantComplete(job, v)) {
           outcomes[i] = completeBatchOutcome();
-          progress.finished(false);
+          progress->finished(false);
           return;
         }
         ProgressContext context;
-        context.report = [&progress, i](uint64_t done, uint64_t total) { progress.report(i, done, total); };
+        context.report = [&progress, i](uint64_t done, uint64_t total) { progress->report(i, done, total); };
         outcomes[i] = runBatchVariant(job, v, tmpl.table, &context);
-        progress.finished(true);
+        progress->finished(true);
       },
       [](std::size_t, std::size_t) {});
 
+  progress.reset();  // the bar's line ends before the table and the messages below
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const BatchTotals totals = batchTotals(outcomes);
   if (!options.quiet) printBatchSummary(stdout, job, tmpl, outcomes, total, false);
