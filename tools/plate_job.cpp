@@ -21,6 +21,7 @@
 #include "io/output_file.h"
 #include "offset/polygon_offset.h"
 #include "parallel/parallel.h"
+#include "tools/progress_bar.h"
 #include "tools/slice_stages.h"
 
 namespace toposlice {
@@ -744,13 +745,17 @@ void PreparedPlateJob::writeReport() const {
   }
 }
 
-PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress) {
+PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress,
+                        const std::function<void(uint32_t, uint32_t)>& onPlate) {
   PreparedPlateJob prepared(job);
   PlateResult& result = prepared.result();
   // Slicing, plate by plate; every output of every plate and the report join one transaction.
   const auto start = std::chrono::steady_clock::now();
   OutputTransaction transaction;
-  for (uint32_t plate = 0; plate < result.plates; ++plate) prepared.slicePlate(plate, progress);
+  for (uint32_t plate = 0; plate < result.plates; ++plate) {
+    if (onPlate) onPlate(plate, result.plates);
+    prepared.slicePlate(plate, progress);
+  }
   result.sliceSeconds = secondsSince(start);
   prepared.writeReport();
   transaction.commit(&interruptRequested());
@@ -786,7 +791,13 @@ int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
   ThreadLimit threads(job.threads);
   PlateResult r;
   try {
-    r = runPlateJob(job, nullptr);
+    // A progress bar on a terminal (not with --quiet), naming the plate; its line ends before the summary.
+    ProgressBar bar("plate", quiet);
+    ProgressContext progress;
+    progress.report = [&bar](uint64_t done, uint64_t total) { bar.update(done, total); };
+    r = runPlateJob(job, &progress, [&bar](uint32_t plate, uint32_t plates) {
+      bar.setLabel("plate " + std::to_string(plate + 1) + "/" + std::to_string(plates) + " layers");
+    });
   } catch (...) {
     std::error_code ec;
     bool empty = !made.empty();

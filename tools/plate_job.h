@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -51,7 +52,10 @@ PrintSettings plateJobSettings(const PlateJob& job);
 // the build height (naming the part and by how much), a variant whose connectivity differs from its
 // template (unless settings.allow_rebuild), a part too large for an empty plate. All outputs of all
 // plates form one OutputTransaction. Throws InputError or OutputError.
-PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress);
+// `progress` reports each plate's layers; `onPlate(plate, plates)`, when given, is called before each
+// plate is sliced (the command's progress bar names the plate with it).
+PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress,
+                        const std::function<void(uint32_t, uint32_t)>& onPlate = {});
 
 // A plate job read, checked and arranged, ready to be sliced plate by plate: runPlateJob slices every
 // plate in one process, toposlice-mpi (tools/mpi_batch.cpp) hands the plates to its ranks, each of
