@@ -7,6 +7,7 @@
 // toposlice (TOPOSLICE_BIN_PATH).
 #include <fcntl.h>
 #include <gtest/gtest.h>
+#include <pty.h>
 #include <sys/stat.h>
 #include <sys/types.h>
 #include <sys/wait.h>
@@ -1239,6 +1240,53 @@ TEST_F(CliToolQuiet, QuietPrintsNothingOnSuccess) {
   ASSERT_EQ(t.code(), 0) << t.describe();
   EXPECT_TRUE(t.out.empty()) << t.out;
   EXPECT_TRUE(t.err.empty()) << t.err;
+}
+
+// Everything the program writes when its output is a terminal (a pseudo-terminal), run in `dir`.
+std::string outputOnTerminal(const fs::path& dir, const std::vector<std::string>& args) {
+  int master = -1;
+  const pid_t pid = ::forkpty(&master, nullptr, nullptr, nullptr);
+  if (pid == 0) {
+    if (::chdir(dir.c_str()) != 0) ::_exit(126);
+    std::vector<std::string> all{toposliceBinary().string()};
+    all.insert(all.end(), args.begin(), args.end());
+    std::vector<char*> argv;
+    for (std::string& a : all) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    ::execv(argv[0], argv.data());
+    ::_exit(127);
+  }
+  std::string out;
+  if (pid < 0) return out;
+  char buffer[4096];
+  for (;;) {
+    const ssize_t n = ::read(master, buffer, sizeof buffer);
+    if (n > 0)
+      out.append(buffer, static_cast<std::size_t>(n));
+    else if (n < 0 && errno == EINTR)
+      continue;
+    else
+      break;  // EIO once the program has ended
+  }
+  ::close(master);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  return out;
+}
+
+// On a terminal the long commands draw a progress bar (slice, and plate naming the plate), and --quiet
+// keeps them silent.
+TEST_F(CliToolQuiet, ProgressBarsOnATerminalAndNotWithQuiet) {
+  const std::string demo = (fs::path(TOPOSLICE_SOURCE_DIR) / "examples" / "plate_demo.json").string();
+  const std::string slice =
+      outputOnTerminal(dir_, {"slice", examplePart().string(), "-H", "0.01", "-o", "t.cli"});
+  EXPECT_TRUE(contains(slice, "100%")) << slice;
+  const std::string plate = outputOnTerminal(dir_, {"plate", demo, "-O", "p"});
+  EXPECT_TRUE(contains(plate, "plate 1/1 layers")) << plate;
+  EXPECT_TRUE(contains(plate, "100%")) << plate;
+  EXPECT_TRUE(contains(plate, "1 plate, 3 parts")) << plate;
+  const std::string quiet = outputOnTerminal(dir_, {"plate", demo, "-O", "q", "-q"});
+  EXPECT_TRUE(quiet.empty()) << quiet;
 }
 
 TEST_F(CliToolQuiet, NoProgressBarWhenStderrIsNotATerminal) {
