@@ -111,8 +111,6 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
   return {};
 }
 
-// Thickness of layer k: h for uniform planes; for an explicit list, half the distance between the
-// neighbouring planes (one-sided at the ends).
 // The layer height of uniform planes (not an explicit list): as given, else the planes' spacing, else
 // (one plane, from a layer count) twice its height above z0, since layer 0 is cut at z0 + h / 2.
 static double uniformLayerHeight(const PlaneSpec& spec, const std::vector<double>& planes, double zmin) {
@@ -121,6 +119,8 @@ static double uniformLayerHeight(const PlaneSpec& spec, const std::vector<double
   return planes.empty() ? 0.0 : 2 * (planes[0] - spec.z0.value_or(zmin));
 }
 
+// Thickness of layer k: h for uniform planes; for an explicit list, half the distance between the
+// neighbouring planes (one-sided at the ends; 0 for a single plane). zmin: the model's lowest z.
 double layerThickness(const std::vector<double>& planes, uint32_t k, const PlaneSpec& spec, double zmin) {
   if (spec.explicitZ.empty())
     return planes.size() >= 2 ? planes[1] - planes[0] : uniformLayerHeight(spec, planes, zmin);
