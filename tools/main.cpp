@@ -259,7 +259,6 @@ void explainPrintSettings(const PrintSettings& p, const std::filesystem::path& m
   }
 }
 
-// slice --explain: nothing is read or written.
 // A setting's key as its command-line option spells it: exposure_time -> exposure-time.
 std::string dashed(std::string key) {
   std::replace(key.begin(), key.end(), '_', '-');
@@ -285,6 +284,7 @@ bool parsePixelSize(const std::string& text, uint64_t max, uint32_t& width, uint
   return number(all.substr(0, x), width) && number(all.substr(x + 1), height);
 }
 
+// slice --explain: nothing is read or written.
 int explainSettings(const std::string& model, const SliceJobOptions& options) {
   validateSliceOptions(options);  // what the run would refuse, --explain refuses too
   std::printf("model      : %s\n", model.c_str());
@@ -466,8 +466,7 @@ int run(int argc, char** argv) {
   std::vector<std::string> keyValues(keys.size());
   std::vector<std::string> keyOptions(keys.size());
   for (std::size_t i = 0; i < keys.size(); ++i) {
-    keyOptions[i] = "--" + std::string(keys[i].name);
-    std::replace(keyOptions[i].begin(), keyOptions[i].end(), '_', '-');
+    keyOptions[i] = "--" + dashed(keys[i].name);
     slice->add_option(keyOptions[i], keyValues[i], keys[i].help)
         ->group(keys[i].owner == SettingOwner::Printer ? "Printer settings" : "Material settings");
   }
@@ -620,10 +619,7 @@ int run(int argc, char** argv) {
     for (const char* opt :
          {"--pixel", "--resolution", "--origin", "--mirror-x", "--mirror-y", "--antialias", "--crop"})
       needs(slice->count(opt) > 0, masks, opt, "mask output (--masks)");
-    std::string maskExt = options.masks.output.extension().string();
-    std::transform(maskExt.begin(), maskExt.end(), maskExt.begin(),
-                   [](char c) { return static_cast<char>(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c); });
-    needs(slice->count("--vdb-layout") > 0, maskExt == ".vdb", "--vdb-layout",
+    needs(slice->count("--vdb-layout") > 0, lowerExtension(options.masks.output) == ".vdb", "--vdb-layout",
           "a .vdb mask output (--masks FILE.vdb)");
     options.masks.vdbSlabs = vdbLayout == "slabs";
     needs(slice->count("--on-mismatch") > 0, !templatePath.empty(), "--on-mismatch",

@@ -142,9 +142,7 @@ class JobParser : public JsonReader {
     bool anyCli = false;
     for (const BatchVariant& v : job_.variants) {
       if (!v.masks.empty()) masks.push_back(v.masks);
-      std::string ext = v.contours.extension().string();
-      for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-      anyCli = anyCli || ext == ".cli";
+      anyCli = anyCli || lowerExtension(v.contours) == ".cli";
     }
     const auto needs = [&](const char* k, bool applies, const char* what) {
       if (find(*settings, k) != nullptr && !applies)

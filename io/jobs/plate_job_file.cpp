@@ -51,11 +51,7 @@ class PlateParser : public JsonReader {
     std::vector<std::filesystem::path> masks;
     if (!job_.masks.empty()) masks.push_back(job_.masks);
     bool anyCli = false, anyTemplate = false, anyAuto = false;
-    for (const auto& c : job_.contours) {
-      std::string ext = c.extension().string();
-      for (char& ch : ext) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-      anyCli = anyCli || ext == ".cli";
-    }
+    for (const auto& c : job_.contours) anyCli = anyCli || lowerExtension(c) == ".cli";
     for (const PlatePart& p : job_.parts) {
       anyTemplate = anyTemplate || !p.templateFile.empty();
       anyAuto = anyAuto || !p.placement;

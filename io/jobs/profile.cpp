@@ -12,6 +12,7 @@
 #include "core/number_text.h"
 #include "core/print/printer.h"
 #include "io/errors.h"
+#include "io/output_file.h"
 
 namespace toposlice {
 namespace {
@@ -357,8 +358,7 @@ std::string settingUnusedReason(std::string_view key, std::span<const std::files
   if (!fileOnly) return "";
   std::string formats;
   for (const auto& path : maskOutputs) {
-    std::string ext = path.extension().string();
-    for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+    const std::string ext = lowerExtension(path);
     if (maskFormatCarries(ext, key)) return "";
     const std::string name = ext.empty() ? "a folder of PNGs" : ext;
     if (formats.find(name) == std::string::npos) formats += (formats.empty() ? "" : ", ") + name;
