@@ -676,9 +676,8 @@ int run(int argc, char** argv) {
               : std::vector<std::filesystem::path>{};
     for (const auto& [key, value] : choice.overrides) {
       const std::string k = key;
-      if (const std::string why = settingUnusedReason(k, maskOutputs); !why.empty())
-        throw InputError("--" + dashed(k) +
-                         " does nothing in this job: " + (masks ? why : "it needs mask output (--masks)"));
+      if (const std::string why = settingUnusedReason(k, maskOutputs, "mask output (--masks)"); !why.empty())
+        throw InputError("--" + dashed(k) + " does nothing in this job: " + why);
       needs(k.starts_with("elefant_foot_") && k != "elefant_foot_compensation",
             options.print.elefantFootCompensation > 0, ("--" + k).c_str(), "elefant_foot_compensation > 0");
     }

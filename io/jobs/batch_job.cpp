@@ -154,10 +154,8 @@ class JobParser : public JsonReader {
     needs("join_tolerance", !job_.method.empty() && job_.method != "sr",
           "method cp or sr-lazy (the default sr joins segments through the adjacency table)");
     for (const auto& [k, value] : job_.printSettings)
-      if (const std::string why = settingUnusedReason(k, masks); !why.empty())
-        fail(childPath(childPath("settings", "print_settings"), k),
-             "does nothing in this job: " +
-                 (masks.empty() ? std::string("it needs a variant with masks") : why));
+      if (const std::string why = settingUnusedReason(k, masks, "a variant with masks"); !why.empty())
+        fail(childPath(childPath("settings", "print_settings"), k), "does nothing in this job: " + why);
   }
 
   void parseVariants(const Json& v) {

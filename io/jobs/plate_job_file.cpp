@@ -67,9 +67,8 @@ class PlateParser : public JsonReader {
     needs("settings", "allow_rebuild", anyTemplate, "a part with a template");
     needs("arrange", "rotation_step", anyAuto, "a part placed \"auto\"");
     for (const auto& [k, value] : job_.printSettings)
-      if (const std::string why = settingUnusedReason(k, masks); !why.empty())
-        fail(childPath("print_settings", k),
-             "does nothing in this job: " + (masks.empty() ? std::string("it needs outputs.masks") : why));
+      if (const std::string why = settingUnusedReason(k, masks, "outputs.masks"); !why.empty())
+        fail(childPath("print_settings", k), "does nothing in this job: " + why);
   }
 
   void parseSettings(const Json& v) {

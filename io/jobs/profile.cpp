@@ -343,7 +343,8 @@ bool maskFormatCarries(const std::string& ext, std::string_view key) {
 
 }  // namespace
 
-std::string settingUnusedReason(std::string_view key, std::span<const std::filesystem::path> maskOutputs) {
+std::string settingUnusedReason(std::string_view key, std::span<const std::filesystem::path> maskOutputs,
+                                std::string_view maskOutputName) {
   static constexpr std::string_view kPrinterFileOnly[] = {
       "printer_model",        "exposure_time",     "initial_exposure_time",
       "faded_layers",         "lift_distance",     "lift_speed",
@@ -354,7 +355,7 @@ std::string settingUnusedReason(std::string_view key, std::span<const std::files
   const bool maskOnly =
       fileOnly || key.starts_with("display_") || key == "gamma_correction" || key == "light_map";
   if (!maskOnly) return "";
-  if (maskOutputs.empty()) return "it needs mask output";
+  if (maskOutputs.empty()) return "it needs " + std::string(maskOutputName);
   if (!fileOnly) return "";
   std::string formats;
   for (const auto& path : maskOutputs) {

@@ -88,11 +88,12 @@ std::span<const SettingKey> settingKeys();
 
 // Why `key`, a setting the user gave explicitly, would do nothing in a job whose mask outputs are
 // `maskOutputs` (none: a contour-only job), or "" when it applies. Settings that only the masks use
-// need a mask output; the ones that are only written into the printer file (printer_model, the
-// exposures, the motion and light keys) need a mask format that carries them: SL1 the model and
-// exposures, NanoDLP the exposures and the lift, retract and wait keys, GOO all of them, EXR and VDB all
-// (as metadata), a PNG folder none.
-std::string settingUnusedReason(std::string_view key, std::span<const std::filesystem::path> maskOutputs);
+// need a mask output ("it needs " + `maskOutputName`, what the job would have to give); the ones that are
+// only written into the printer file (printer_model, the exposures, the motion and light keys) need a mask
+// format that carries them: SL1 the model and exposures, NanoDLP the exposures and the lift, retract and wait
+// keys, GOO all of them, EXR and VDB all (as metadata), a PNG folder none.
+std::string settingUnusedReason(std::string_view key, std::span<const std::filesystem::path> maskOutputs,
+                                std::string_view maskOutputName);
 
 // Which profiles to use and the overrides (key, value text) on top.
 struct ProfileChoice {
