@@ -98,7 +98,10 @@ bool isLayerFileName(const std::string& name, std::string_view ext) {
 
 }  // namespace
 
-int registerPendingOutput(const std::string& path, bool folder) noexcept {
+int registerPendingOutput(const std::filesystem::path& temp, bool folder) {
+  std::error_code ec;
+  const std::filesystem::path absolute = std::filesystem::absolute(temp, ec);
+  const std::string path = ec ? temp.string() : absolute.string();
   if (path.size() + 1 > kSlotPathSize) return -1;
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
     int expected = 0;
@@ -207,11 +210,8 @@ OutputFile::OutputFile(std::filesystem::path finalPath, bool overwrite)
   tempPath_ += ".tmp-" + std::to_string(::getpid()) + "-" + std::to_string(counter);
   const std::string temp = tempPath_.string();
   buffer_ = std::make_unique_for_overwrite<char[]>(kBufferSize);
-  // Registered before it exists, so that no instant has a temporary on disk the handler does not know;
-  // absolute, so that a later change of the working directory does not matter.
-  std::error_code ec;
-  const std::filesystem::path absolute = std::filesystem::absolute(tempPath_, ec);
-  registrySlot_ = registerPendingOutput(ec ? temp : absolute.string());
+  // Registered before it exists, so that no instant has a temporary on disk the handler does not know.
+  registrySlot_ = registerPendingOutput(tempPath_);
   fd_ = ::open(temp.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
   if (fd_ < 0) {
     const int err = errno;

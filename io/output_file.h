@@ -212,9 +212,10 @@ class OutputTransaction {
   bool done_ = false;
 };
 
-// Registers a temporary path in the signal table (see above); returns the slot or -1. Releases one.
-// A folder's entry (folder = true) is a staged folder of files: the handler removes its files, then it.
-int registerPendingOutput(const std::string& path, bool folder = false) noexcept;
+// Registers a temporary path in the signal table (see above), made absolute so that a later change of
+// the working directory does not matter; returns the slot or -1. Releases one. A folder's entry
+// (folder = true) is a staged folder of files: the handler removes its files, then the folder.
+int registerPendingOutput(const std::filesystem::path& path, bool folder = false);
 void unregisterPendingOutput(int slot) noexcept;
 
 }  // namespace toposlice

@@ -38,9 +38,7 @@ StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite
   transaction_ = OutputTransaction::current();
   tempPath_ = siblingName(finalPath_, ".tmp-");
   if (::mkdir(tempPath_.c_str(), 0777) != 0) throw OutputError(cannotCreateMessage(finalPath_, errno));
-  std::error_code ec;
-  const std::filesystem::path absolute = std::filesystem::absolute(tempPath_, ec);
-  registrySlot_ = registerPendingOutput(ec ? tempPath_.string() : absolute.string(), /*folder=*/true);
+  registrySlot_ = registerPendingOutput(tempPath_, /*folder=*/true);
 }
 
 StagedDirectory::~StagedDirectory() {

@@ -661,7 +661,7 @@ int runPlateRank(const Options& options, int rank, int size) {
           continue;
         }
         for (OutputTransaction::Staged& s : byPlate[plate]) {
-          if (s.kind == OutputKind::File) s.registrySlot = registerPendingOutput(s.temp.string());
+          s.registrySlot = registerPendingOutput(s.temp, s.kind == OutputKind::LayerFolder);
           all.stage(std::move(s));
         }
       }
