@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <map>
 #include <stdexcept>
 
@@ -59,33 +60,39 @@ void rotateSoup(FacetSoup& soup, double degrees) {
   }
 }
 
+// Every output path of plates [first, end), with whether it is the masks (whose check depends on their
+// format); the report, which is one for all plates, with the first plate.
+void forEachPlateOutput(const PlateJob& job, uint32_t first, uint32_t end,
+                        const std::function<void(const std::filesystem::path&, bool masks)>& visit) {
+  if (first == 0 && !job.report.empty()) visit(job.report, false);
+  for (uint32_t plate = first; plate < end; ++plate) {
+    if (!job.masks.empty()) visit(plateOutputPath(job.masks, plate), true);
+    if (!job.picture.empty()) visit(plateOutputPath(job.picture, plate), false);
+    for (const auto& c : job.contours) visit(plateOutputPath(c, plate), false);
+  }
+}
+
 // Two outputs of the job that name one file (two contour paths that -O puts in one folder, a given
 // "o/c-plate2.cli" beside "o/c.cli" on two plates): refused, as slice refuses an output given twice.
 void checkDistinctPlateOutputs(const PlateJob& job, uint32_t plates) {
   std::map<std::filesystem::path, std::filesystem::path> seen;  // resolved -> as named
-  const auto add = [&](const std::filesystem::path& path) {
+  forEachPlateOutput(job, 0, plates, [&](const std::filesystem::path& path, bool) {
     const auto [it, added] = seen.emplace(resolvedPath(path), path);
     if (!added)
       throw InputError(path.string() + ": given as more than one output" +
                        (it->second == path ? "" : " (it is " + it->second.string() + ")"));
-  };
-  if (!job.report.empty()) add(job.report);
-  for (uint32_t plate = 0; plate < plates; ++plate)
-    for (const auto* p : {&job.masks, &job.picture})
-      if (!p->empty()) add(plateOutputPath(*p, plate));
-  for (uint32_t plate = 0; plate < plates; ++plate)
-    for (const auto& c : job.contours) add(plateOutputPath(c, plate));
+  });
 }
 
 // Outputs of plates [first, end) that may not be written (they exist and the job does not overwrite, or
-// they are not toposlice's to replace), refused before the slicing; the report with the first plate.
+// they are not toposlice's to replace), refused before the slicing.
 void checkPlateOutputs(const PlateJob& job, uint32_t first, uint32_t end) {
-  if (first == 0 && !job.report.empty()) checkOutputAllowed(job.report, job.overwrite);
-  for (uint32_t plate = first; plate < end; ++plate) {
-    if (!job.masks.empty()) checkMaskOutputAllowed(plateOutputPath(job.masks, plate), job.overwrite);
-    if (!job.picture.empty()) checkOutputAllowed(plateOutputPath(job.picture, plate), job.overwrite);
-    for (const auto& c : job.contours) checkOutputAllowed(plateOutputPath(c, plate), job.overwrite);
-  }
+  forEachPlateOutput(job, first, end, [&](const std::filesystem::path& path, bool masks) {
+    if (masks)
+      checkMaskOutputAllowed(path, job.overwrite);
+    else
+      checkOutputAllowed(path, job.overwrite);
+  });
 }
 
 BoundingBox unite(const BoundingBox& a, const BoundingBox& b) {
