@@ -124,7 +124,8 @@ std::string writeFailureReason(const std::filesystem::path& file, int savedErrno
 std::string lowerExtension(const std::filesystem::path& path);
 
 // The archive comment of every zip toposlice writes (SL1, NanoDLP, 3MF): how checkReplaceable tells
-// toposlice's archives from other programs' (a PrusaSlicer .sl1, a CAD .3mf), which start alike.
+// toposlice's archives from other programs' (a PrusaSlicer .sl1, a CAD .3mf), which start alike. It views
+// a string literal, so data() is a C string for minizip's zipClose.
 inline constexpr std::string_view kZipComment = "written by toposlice";
 
 // What an output is, for the overwrite check.

@@ -266,8 +266,7 @@ void ZipStream::add(const std::string& name, std::span<const uint8_t> data, std:
 }
 
 void ZipStream::close() {
-  const std::string comment(kZipComment);  // how --force tells toposlice's archives from others'
-  const int rc = zipClose(static_cast<zipFile>(zip_), comment.c_str());
+  const int rc = zipClose(static_cast<zipFile>(zip_), kZipComment.data());  // how --force knows it
   zip_ = nullptr;
   if (rc != ZIP_OK) throw OutputError(file_.finalPath().string() + ": cannot write: " + errorText(rc));
   addZip64EndRecords(file_.tempPath(), entries_);

@@ -306,8 +306,7 @@ class ThreeMfWriter final : public ContourSink {
     flushText();
     int rc = zipCloseFileInZip(zip_.get());
     if (rc != ZIP_OK) fail("cannot write 3D/3dmodel.model", rc);
-    const std::string comment(kZipComment);  // how --force tells toposlice's archives from others'
-    rc = zipClose(zip_.release(), comment.c_str());
+    rc = zipClose(zip_.release(), kZipComment.data());  // the comment: how --force knows it
     if (rc != ZIP_OK) fail("cannot write", rc);
     alignCentralVersions(file_.tempPath(), file_.finalPath());
     file_.commit();
