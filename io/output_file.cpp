@@ -54,18 +54,36 @@ int renameNoReplace(const std::string& from, const std::string& to) {
   return ::rename(from.c_str(), to.c_str()) == 0 ? 0 : errno;
 }
 
-// The first bytes a file of this extension starts with when toposlice wrote it; empty: not checked.
-std::vector<std::string_view> signaturesFor(const std::string& ext) {
+// How a file of an extension starts when toposlice wrote it (`starts`, one of them), and the mark that
+// its first kHeadBytes then hold somewhere (`holds`, empty: none beyond the start; a zip's mark is its
+// comment, at the end). `known` false: toposlice writes no such file.
+struct OwnMark {
+  bool known = false;
+  std::vector<std::string_view> starts;
+  std::string_view holds;
+};
+constexpr std::size_t kHeadBytes = 4096;
+
+OwnMark ownMarkFor(const std::string& ext) {
   using namespace std::string_view_literals;
-  if (ext == ".cli") return {"$$HEADERSTART"sv};
-  if (ext == ".svg") return {"<?xml"sv, "<svg"sv};
-  if (ext == ".3mf" || ext == ".sl1" || ext == ".sl1s" || ext == ".nanodlp") return {"PK\x03\x04"sv};
-  if (ext == ".goo") return {"V3.0\x07\0\0\0DLP\0"sv};  // version, then the magic tag
-  if (ext == ".vdb") return {" BDV"sv};
-  if (ext == ".png") return {"\x89PNG"sv};
-  if (ext == ".topo") return {"TOPOSLC"sv};
-  if (ext == ".csv") return {"layer,z_mm,area_"sv};         // the per-layer report's header
-  if (ext == ".json") return {"{\n  \"toposlice\": \""sv};  // summaries and plate reports: their first key
+  // The literals below spell the marks of output_file.h out with the bytes around them.
+  static_assert(kCliMarkLine == "// written by toposlice //\n"sv &&
+                kSvgMarkLine == "<!-- written by toposlice -->\n"sv && kSoftwareName == "toposlice"sv);
+  if (ext == ".cli") return {true, {"$$HEADERSTART\n// written by toposlice //\n"sv}, {}};
+  if (ext == ".svg")
+    return {true, {"<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<!-- written by toposlice -->\n"sv}, {}};
+  if (ext == ".3mf" || ext == ".sl1" || ext == ".sl1s" || ext == ".nanodlp")
+    return {true, {"PK\x03\x04"sv}, {}};
+  if (ext == ".goo") return {true, {"V3.0\x07\0\0\0DLP\0toposlice\0"sv}, {}};  // version, magic, software
+  // The file metadata "creator" (a name, a type name and a value, each after its 32-bit length).
+  if (ext == ".vdb") return {true, {" BDV"sv}, "\x07\0\0\0creator\x06\0\0\0string\x09\0\0\0toposlice"sv};
+  // The tEXt chunk's type, its keyword and text.
+  if (ext == ".png") return {true, {"\x89PNG\r\n\x1a\n"sv}, "tEXtSoftware\0toposlice"sv};
+  // The header attribute: name, type, size, value.
+  if (ext == ".exr") return {true, {"v/1\x01"sv}, "software\0string\0\x09\0\0\0toposlice"sv};
+  if (ext == ".topo") return {true, {"TOPOSLC"sv}, {}};
+  if (ext == ".csv") return {true, {"layer,z_mm,area_"sv}, {}};         // the per-layer report's header
+  if (ext == ".json") return {true, {"{\n  \"toposlice\": \""sv}, {}};  // summaries and plate reports
   return {};
 }
 
@@ -86,6 +104,34 @@ bool endsWithOurZipComment(const std::filesystem::path& path) {
       static_cast<std::size_t>(static_cast<uint8_t>(t[20]) | static_cast<uint8_t>(t[21]) << 8);
   return t.starts_with(std::string_view("PK\x05\x06", 4)) && commentSize == kZipComment.size() &&
          t.substr(22) == kZipComment;
+}
+
+std::string reason(int err) {
+  return std::generic_category().message(err);
+}
+
+// Whether the regular file at `path` is empty or one toposlice wrote, by `mark`. Throws OutputError when
+// it cannot be read.
+bool emptyOrOurs(const std::filesystem::path& path, const OwnMark& mark) {
+  char head[kHeadBytes];
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) throw OutputError(path.string() + ": cannot read the existing file: " + reason(errno));
+  std::size_t size = 0;
+  while (size < sizeof head) {
+    const ssize_t n = ::read(fd, head + size, sizeof head - size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    size += static_cast<std::size_t>(n);
+  }
+  ::close(fd);
+  const std::string_view start(head, size);
+  if (start.empty()) return true;  // an empty file holds nothing to lose
+  for (const std::string_view sig : mark.starts) {
+    if (!start.starts_with(sig)) continue;
+    if (sig == "PK\x03\x04") return endsWithOurZipComment(path);
+    return mark.holds.empty() || start.find(mark.holds) != std::string_view::npos;
+  }
+  return false;
 }
 
 bool isLayerFileName(const std::string& name, std::string_view ext) {
@@ -120,14 +166,6 @@ void unregisterPendingOutput(int slot) noexcept {
   gPending[slot].state.store(1, std::memory_order_relaxed);
   gPending[slot].state.store(0, std::memory_order_release);
 }
-
-namespace {
-
-std::string reason(int err) {
-  return std::generic_category().message(err);
-}
-
-}  // namespace
 
 bool outputPathExists(const std::filesystem::path& p) {
   std::error_code ec;
@@ -373,34 +411,30 @@ void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::s
                         ": is a folder; toposlice writes a file there and never replaces a folder" + refused);
     if (st.type() != fs::file_type::regular)
       throw OutputError(path.string() + ": is not a regular file; not replaced" + refused);
-    if (fs::file_size(path, ec) == 0 && !ec) return;  // an empty file holds nothing to lose
-    const std::vector<std::string_view> signatures = signaturesFor(lowerExtension(path));
-    if (signatures.empty())
+    const OwnMark mark = ownMarkFor(lowerExtension(path));
+    if (!mark.known) {
+      if (fs::file_size(path, ec) == 0 && !ec) return;  // an empty file holds nothing to lose
       throw OutputError(path.string() + ": exists, and toposlice writes no '" + lowerExtension(path) +
                         "' files, so it cannot have written it; not replaced" + refused);
-    char head[32] = {};
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) throw OutputError(path.string() + ": cannot read the existing file: " + reason(errno));
-    const ssize_t n = ::read(fd, head, sizeof head);
-    ::close(fd);
-    std::string_view start(head, n > 0 ? static_cast<std::size_t>(n) : 0);
-    for (const std::string_view sig : signatures)
-      if (start.starts_with(sig) && (sig != "PK\x03\x04" || endsWithOurZipComment(path))) return;
+    }
+    if (emptyOrOurs(path, mark)) return;
     throw OutputError(path.string() + ": exists and is not a " + lowerExtension(path).substr(1) +
-                      " file toposlice wrote (its first bytes differ); not replaced" + refused);
+                      " file toposlice wrote (it lacks toposlice's mark); not replaced" + refused);
   }
   if (st.type() != fs::file_type::directory)
     throw OutputError(path.string() + ": exists and is not a folder of layers toposlice wrote; not replaced" +
                       refused);
   std::string ext(layerExt);
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const OwnMark mark = ownMarkFor(ext);
   for (const fs::directory_entry& entry : fs::directory_iterator(path, ec)) {
     const std::string name = entry.path().filename().string();
     const fs::file_status es = entry.symlink_status(ec);
     if (es.type() == fs::file_type::directory)
       throw OutputError(path.string() + ": holds the folder '" + name +
                         "', which toposlice did not write; the folder is not replaced" + refused);
-    if (es.type() != fs::file_type::regular || !isLayerFileName(name, ext))
+    if (es.type() != fs::file_type::regular || !isLayerFileName(name, ext) ||
+        !emptyOrOurs(entry.path(), mark))
       throw OutputError(path.string() + ": holds '" + name +
                         "', which toposlice did not write; the folder is not replaced" + refused);
   }

@@ -123,22 +123,33 @@ std::string writeFailureReason(const std::filesystem::path& file, int savedErrno
 // are chosen by it.
 std::string lowerExtension(const std::filesystem::path& path);
 
-// The archive comment of every zip toposlice writes (SL1, NanoDLP, 3MF): how checkReplaceable tells
-// toposlice's archives from other programs' (a PrusaSlicer .sl1, a CAD .3mf), which start alike. It views
-// a string literal, so data() is a C string for minizip's zipClose.
+// How checkReplaceable tells the files toposlice wrote from other programs' files of the same format,
+// which start alike (a PrusaSlicer .sl1, a CAD .3mf, a photo at a preview's path): every file toposlice
+// writes carries one of these marks where its format has room for a note (FORMATS.md, "Overwrite
+// policy"). They view string literals, so data() is a C string.
+// - The archive comment of every zip (SL1, NanoDLP, 3MF).
 inline constexpr std::string_view kZipComment = "written by toposlice";
+// - The comment line right after $$HEADERSTART of a CLI file (ASCII and binary).
+inline constexpr std::string_view kCliMarkLine = "// written by toposlice //\n";
+// - The comment right after an SVG file's XML declaration.
+inline constexpr std::string_view kSvgMarkLine = "<!-- written by toposlice -->\n";
+// - The program's name as the writing software: a PNG's tEXt chunk "Software", an EXR layer's string
+//   attribute "software", a GOO header's software field, a VDB file's metadata "creator".
+inline constexpr std::string_view kSoftwareName = "toposlice";
 
 // What an output is, for the overwrite check.
 enum class OutputKind { File, LayerFolder };
 
 // Throws OutputError unless the existing entry at `path` may be replaced by a toposlice output of that
-// kind: a File output replaces a regular file (or a link) whose first bytes match the format of its
-// extension (.cli, .svg, .goo, .vdb, .png, .topo; a .3mf, .sl1, .sl1s or .nanodlp zip that also ends with
-// the comment kZipComment; a .csv that starts with the
-// per-layer report's header, a .json whose first key is "toposlice"), or any empty file; a file of any
-// other extension is never replaced (toposlice writes none); a LayerFolder output replaces a folder holding
-// only regular files named <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png",
-// ".exr"). The message names one entry toposlice would not have written. A missing path is fine.
+// kind: a File output replaces a regular file (or a link) that starts as toposlice writes the format of its
+// extension and carries toposlice's mark (above): .cli and .svg with the mark line, .goo with the software
+// field, .png, .exr and .vdb with the mark in their first 4 KiB, a .3mf, .sl1, .sl1s or .nanodlp zip that
+// ends with the comment kZipComment, a .topo table, a .csv that starts with the per-layer report's header,
+// a .json whose first key is "toposlice"; or any empty file. A file of any other extension is never
+// replaced (toposlice writes none). A LayerFolder output replaces a folder holding only regular files named
+// <anything><digits>.<ext> for the folder's layer extension `layerExt` (".png", ".exr"), each empty or
+// one toposlice wrote by the rule above. The message names one entry toposlice would not have written. A
+// missing path is fine.
 void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
 
 // The check every writer makes when it opens `path`, made up front by a command before its long work: a

@@ -4,10 +4,12 @@
 #include <spng.h>
 
 #include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <string>
 
 #include "io/errors.h"
+#include "io/output_file.h"
 
 namespace toposlice {
 
@@ -25,6 +27,12 @@ void encodeRgbPng(const RgbImage& image, std::vector<uint8_t>& out) {
   if (rc == 0) rc = spng_set_option(ctx.get(), SPNG_FILTER_CHOICE, SPNG_FILTER_CHOICE_SUB);
   if (rc == 0) rc = spng_set_option(ctx.get(), SPNG_IMG_COMPRESSION_LEVEL, 1);
   if (rc == 0) rc = spng_set_ihdr(ctx.get(), &ihdr);
+  spng_text software{};  // how --force knows the file (checkReplaceable)
+  std::memcpy(software.keyword, "Software", 9);
+  software.type = SPNG_TEXT;
+  software.length = kSoftwareName.size();
+  software.text = const_cast<char*>(kSoftwareName.data());
+  if (rc == 0) rc = spng_set_text(ctx.get(), &software, 1);
   if (rc == 0)
     rc = spng_encode_image(ctx.get(), image.rgb.data(), image.rgb.size(), SPNG_FMT_PNG, SPNG_ENCODE_FINALIZE);
   std::size_t size = 0;

@@ -36,6 +36,7 @@
 #include "io/coders/mask_png.h"
 #include "io/masks/exr_writer.h"
 #include "io/readers/stl_writer.h"
+#include "tests/fixtures/archives.h"
 #include "tests/fixtures/shapes.h"
 #include "tests/fixtures/winding.h"
 #include "tests/tinyexr_read.h"
@@ -275,7 +276,7 @@ TEST_F(CliToolSliceErrors, UnknownOutputExtensionIsRefused) {
 // 4. existing outputs
 
 TEST_F(CliToolOverwrite, ExistingOutputIsKeptWithoutForceAndReplacedWithIt) {
-  const std::string old = "$$HEADERSTART\nan older CLI file, kept without --force\n";
+  const std::string old = fixtures::fileToposliceWrote(".cli", "an older CLI file, kept without --force\n");
   writeBytes(path("out.cli"), old);
 
   const RunResult refused = run({"slice", examplePart().string(), "-H", "0.5", "-o", "out.cli"});
@@ -288,7 +289,7 @@ TEST_F(CliToolOverwrite, ExistingOutputIsKeptWithoutForceAndReplacedWithIt) {
   const RunResult forced = run({"slice", examplePart().string(), "-H", "0.5", "-o", "out.cli", "--force"});
   ASSERT_EQ(forced.code(), 0) << forced.describe();
   const std::string cli = readBytes(path("out.cli"));
-  EXPECT_TRUE(cli.starts_with("$$HEADERSTART\n$$ASCII\n")) << cli.substr(0, 100);
+  EXPECT_TRUE(cli.starts_with("$$HEADERSTART\n// written by toposlice //\n$$ASCII\n")) << cli.substr(0, 100);
   EXPECT_TRUE(contains(cli, "$$LAYERS/13\n"));  // ceil(6.2 / 0.5)
   EXPECT_TRUE(cli.ends_with("$$GEOMETRYEND\n"));
   expectNoTemporaries();
@@ -402,7 +403,7 @@ TEST_F(CliToolDeterminism, ExamplePartIsByteIdenticalForEveryThreadCountAndBandS
       refCli = cli;
       refSl1 = sl1;
       refPng = png;
-      EXPECT_TRUE(cli.starts_with("$$HEADERSTART\n$$BINARY\n"));
+      EXPECT_TRUE(cli.starts_with("$$HEADERSTART\n// written by toposlice //\n$$BINARY\n"));
       EXPECT_TRUE(contains(cli, "$$LAYERS/124\n"));  // ceil(6.2 / 0.05)
       EXPECT_EQ(png.size(), 124u);
       continue;

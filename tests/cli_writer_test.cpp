@@ -84,6 +84,7 @@ TEST(CliWriter, AsciiExact) {
   writeSample(dir / "a.cli", false);
   const std::string expected =
       "$$HEADERSTART\n"
+      "// written by toposlice //\n"
       "$$ASCII\n"
       "$$UNITS/00000001.000000\n"
       "$$VERSION/200\n"
@@ -173,7 +174,8 @@ TEST(CliWriter, BinaryRoundTrip) {
   const std::string bytes = readFile(dir / "b.cli");
   const CliFile file = parseBinaryCli(bytes);
   EXPECT_EQ(file.header,
-            "$$HEADERSTART\n$$BINARY\n$$UNITS/00000001.000000\n$$VERSION/200\n$$LABEL/1,demo\n"
+            "$$HEADERSTART\n// written by toposlice "
+            "//\n$$BINARY\n$$UNITS/00000001.000000\n$$VERSION/200\n$$LABEL/1,demo\n"
             "$$DIMENSION/0.000000,0.000000,0.000000,10.000000,10.000000,0.100000\n$$LAYERS/2\n$$HEADEREND");
 
   const auto layers = sampleLayers();
@@ -241,6 +243,7 @@ TEST(CliWriter, FeaturesAreLabelledPartsAndRemovalsAreReversed) {
   sink->finish();
   const std::string expected =
       "$$HEADERSTART\n"
+      "// written by toposlice //\n"
       "$$ASCII\n"
       "$$UNITS/00000001.000000\n"
       "$$VERSION/200\n"
@@ -336,23 +339,23 @@ TEST(CliWriter, NothingUnderFinalNameBeforeFinish) {
 TEST(CliWriter, ExistingFileNeedsOverwrite) {
   ScratchDir dir;
   const fs::path path = dir / "old.cli";
-  writeText(path, "$$HEADERSTART old");
+  writeText(path, "$$HEADERSTART\n// written by toposlice //\nold");
   try {
     makeCliWriter(path, sampleJob(), true, false);
     FAIL() << "no OutputError";
   } catch (const OutputError& e) {
     EXPECT_EQ(std::string(e.what()), path.string() + ": already exists (use --force to overwrite)");
   }
-  EXPECT_EQ(readFile(path), "$$HEADERSTART old");
+  EXPECT_EQ(readFile(path), "$$HEADERSTART\n// written by toposlice //\nold");
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"old.cli"});
 
   const auto layers = sampleLayers();
   auto sink = makeCliWriter(path, sampleJob(), false, true);
   sink->writeLayer(0, layers[0]);
   sink->writeLayer(1, layers[1]);
-  EXPECT_EQ(readFile(path), "$$HEADERSTART old");  // replaced only by finish()
+  EXPECT_EQ(readFile(path), "$$HEADERSTART\n// written by toposlice //\nold");  // replaced only by finish()
   sink->finish();
-  EXPECT_EQ(readFile(path).rfind("$$HEADERSTART\n$$ASCII\n", 0), 0u);
+  EXPECT_EQ(readFile(path).rfind("$$HEADERSTART\n// written by toposlice //\n$$ASCII\n", 0), 0u);
   EXPECT_EQ(dir.entries(), std::vector<std::string>{"old.cli"});
 }
 

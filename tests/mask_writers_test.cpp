@@ -373,11 +373,16 @@ bool inflatePng(const std::vector<uint8_t>& png, InflatedPng& result) {
       }
     }
     if (type == "IDAT") result.zlibStream.assign(data, data + length);
+    if (type == "tEXt" &&
+        std::string(reinterpret_cast<const char*>(data), length) != std::string("Software\0toposlice", 18)) {
+      ADD_FAILURE() << "the tEXt chunk is not Software: toposlice";
+      return false;
+    }
     types.push_back(type);
     at += 12 + length;
   }
-  if (types != std::vector<std::string>{"IHDR", "IDAT", "IEND"}) {
-    ADD_FAILURE() << "chunks are not IHDR IDAT IEND";
+  if (types != std::vector<std::string>{"IHDR", "tEXt", "IDAT", "IEND"}) {
+    ADD_FAILURE() << "chunks are not IHDR tEXt IDAT IEND";
     return false;
   }
   if (result.zlibStream.size() < 3) {
@@ -1372,13 +1377,10 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
     const std::string ext = out.extension().string();
     if (ext.empty() || ext == ".exr") {
       fs::create_directory(out);
-      std::ofstream(out / (ext.empty() ? "old00000.png" : "old00000.exr")) << "old";
+      const std::string layer = ext.empty() ? ".png" : ".exr";
+      std::ofstream(out / ("old00000" + layer)) << fixtures::fileToposliceWrote(layer, "old");
     } else {
-      if (ext == ".vdb") {
-        std::ofstream(out) << " BDVold";
-      } else {
-        std::ofstream(out) << fixtures::zipToposliceWrote("old");
-      }
+      std::ofstream(out) << fixtures::fileToposliceWrote(ext, "old");
     }
   };
   for (size_t n = 0; n < std::size(kOutputs); ++n) {
@@ -1408,18 +1410,24 @@ TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
 TEST_F(MaskStaging, OverwriteNeverReplacesForeignContent) {
   const MaskJob job = smallJob(16, 16, 1, false);
   fs::create_directory(dir_ / "stack");
-  std::ofstream(dir_ / "stack" / "part00000.png") << "png";
+  std::ofstream(dir_ / "stack" / "part00000.png") << fixtures::fileToposliceWrote(".png", "png");
   std::ofstream(dir_ / "stack" / "notes.txt") << "mine";
   fs::create_directory(dir_ / "stack2");
   fs::create_directory(dir_ / "stack2" / "sub");
+  // Layer files named as toposlice names them, of their format, but written by another program: a PNG
+  // without toposlice's tEXt chunk, an EXR without its "software" attribute.
+  fs::create_directory(dir_ / "stack3");
+  std::ofstream(dir_ / "stack3" / "photo00001.png") << std::string("\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR", 16);
+  fs::create_directory(dir_ / "part.exr");
+  std::ofstream(dir_ / "part.exr" / "render0001.exr") << std::string("v/1\x01\2\0\0\0channels\0chlist\0", 24);
   std::ofstream(dir_ / "plain") << "a file where a folder would go";
   std::ofstream(dir_ / "part.sl1") << "not a zip";
-  std::ofstream(dir_ / "part.vdb") << "not a grid";
-  const std::pair<const char*, const char*> cases[] = {{"stack", "notes.txt"},
-                                                       {"stack2", "sub"},
-                                                       {"plain", "not a folder"},
-                                                       {"part.sl1", "not a sl1"},
-                                                       {"part.vdb", "not a vdb"}};
+  // A grid file of another program: the VDB magic without toposlice's "creator".
+  std::ofstream(dir_ / "part.vdb") << std::string(" BDV\0\0\0\0\xe0\0\0\0", 12) << "houdini";
+  const std::pair<const char*, const char*> cases[] = {
+      {"stack", "notes.txt"},     {"stack2", "sub"},         {"stack3", "photo00001.png"},
+      {"part.exr", "render0001"}, {"plain", "not a folder"}, {"part.sl1", "not a sl1"},
+      {"part.vdb", "not a vdb"}};
   for (const auto& [name, named] : cases) {
     try {
       makeMaskSink(dir_ / name, job, true);
@@ -1430,7 +1438,10 @@ TEST_F(MaskStaging, OverwriteNeverReplacesForeignContent) {
   }
   EXPECT_TRUE(fs::exists(dir_ / "stack" / "notes.txt"));
   EXPECT_TRUE(fs::exists(dir_ / "stack2" / "sub"));
+  EXPECT_TRUE(fs::exists(dir_ / "stack3" / "photo00001.png"));
+  EXPECT_TRUE(fs::exists(dir_ / "part.exr" / "render0001.exr"));
   EXPECT_EQ(fs::file_size(dir_ / "part.sl1"), 9u);
+  EXPECT_EQ(fs::file_size(dir_ / "part.vdb"), 19u);
 }
 
 TEST_F(MaskStaging, OutputCreatedMeanwhileIsNotReplaced) {

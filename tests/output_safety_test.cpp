@@ -12,6 +12,7 @@
 
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -254,6 +255,62 @@ TEST_F(OutputSafety, ForceRefusesForeignJsonCsvAndOtherExtensions) {
   const RunResult again = run(second);
   ASSERT_EQ(again.code(), 0) << again.describe();
   EXPECT_TRUE(contains(readBytes(path("r.csv")), "\n6,")) << "7 layers at 1 mm";
+  expectNoTemporaries();
+}
+
+// Files of the formats toposlice writes, written by other programs, start as toposlice's do; --force
+// tells them apart by toposlice's mark (a CLI and SVG comment, a PNG tEXt chunk, an EXR attribute, the
+// GOO software field, the VDB "creator"), and replaces only its own, layer folders file by file.
+TEST_F(OutputSafety, ForceRefusesOtherProgramsFilesOfTheFormatsToposliceWrites) {
+  using namespace std::string_literals;
+  const std::string png = "\x89PNG\r\n\x1a\n\0\0\0\x0dIHDR\0\0\0\x10\0\0\0\x10\x08\x02\0\0\0"s +
+                          "\0\0\0\0\0\0\0\x0dtEXtSoftware\0GIMP"s;
+  const std::map<std::string, std::string> foreign{
+      {"photo.png", png},
+      {"other.cli", "$$HEADERSTART\n$$ASCII\n$$UNITS/1\n$$HEADEREND\n$$GEOMETRYSTART\n"},
+      {"drawing.svg",
+       "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\"/>\n"},
+      {"chitu.goo", "V3.0\x07\0\0\0DLP\0CHITUBOX\0"s + std::string(40, '\0')},
+      {"cloud.vdb", " BDV\0\0\0\0\xe0\0\0\0\x0a\0\0\0\x01houdini"s},
+      {"shots/img0001.png", png},
+      {"renders.exr/frame0001.exr", "v/1\x01\2\0\0\0channels\0chlist\0"s},
+  };
+  fs::create_directory(path("shots"));
+  fs::create_directory(path("renders.exr"));
+  for (const auto& [name, bytes] : foreign) writeBytes(path(name), bytes);
+  const std::string part = examplePart().string();
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
+      {{"preview", part, "-o", "photo.png"}, "photo.png"},
+      {{"slice", part, "-H", "0.5", "-o", "other.cli"}, "other.cli"},
+      {{"slice", part, "-H", "0.5", "-o", "drawing.svg"}, "drawing.svg"},
+      {{"slice", part, "-H", "0.5", "--masks", "chitu.goo", "--printer", "sl1"}, "chitu.goo"},
+      {{"slice", part, "-H", "0.5", "--masks", "cloud.vdb", "--printer", "sl1"}, "cloud.vdb"},
+      {{"slice", part, "-H", "0.5", "--masks", "shots", "--printer", "sl1"}, "img0001.png"},
+      {{"slice", part, "-H", "0.5", "--masks", "renders.exr", "--printer", "sl1"}, "frame0001.exr"},
+  };
+  for (auto [args, named] : cases) {
+    args.push_back("--force");
+    const RunResult r = run(args);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, named)) << r.err;
+    EXPECT_TRUE(contains(r.err, "not replaced")) << r.err;
+  }
+  for (const auto& [name, bytes] : foreign) EXPECT_EQ(readBytes(path(name)), bytes) << name;
+  expectNoTemporaries();
+
+  // toposlice's own files of each format are replaced.
+  for (const auto& [name, bytes] : foreign) fs::remove(path(name));
+  fs::remove(path("shots"));
+  fs::remove(path("renders.exr"));
+  for (auto [args, named] : cases) {
+    ASSERT_EQ(run(args).code(), 0) << named;
+    args.push_back("--force");
+    if (args[0] == "slice") args[3] = "1";  // 7 layers instead of 13
+    const RunResult again = run(args);
+    EXPECT_EQ(again.code(), 0) << again.describe();
+  }
+  EXPECT_EQ(entries(path("shots")).size(), 7u);
+  EXPECT_EQ(entries(path("renders.exr")).size(), 7u);
   expectNoTemporaries();
 }
 

@@ -3,6 +3,7 @@
 #include "io/coders/mask_png.h"
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <cstring>
 #include <memory>
@@ -13,6 +14,7 @@
 
 #include "core/prefetch.h"
 #include "io/errors.h"
+#include "io/output_file.h"
 
 namespace toposlice {
 namespace {
@@ -45,6 +47,15 @@ void putBigEndian32(uint8_t* p, uint32_t v) {
   p[2] = static_cast<uint8_t>(v >> 8);
   p[3] = static_cast<uint8_t>(v);
 }
+
+// The tEXt chunk's keyword "Software", a zero byte, then the program's name (kSoftwareName).
+constexpr auto kSoftwareText = [] {
+  std::array<uint8_t, 9 + kSoftwareName.size()> text{};
+  constexpr std::string_view keyword("Software", 9);  // with its terminating zero
+  for (std::size_t i = 0; i < keyword.size(); ++i) text[i] = static_cast<uint8_t>(keyword[i]);
+  for (std::size_t i = 0; i < kSoftwareName.size(); ++i) text[9 + i] = static_cast<uint8_t>(kSoftwareName[i]);
+  return text;
+}();
 
 void appendChunk(std::vector<uint8_t>& out, const char type[4], std::span<const uint8_t> data) {
   const size_t at = out.size();
@@ -172,6 +183,7 @@ void encodeMaskPng(const MaskImage& mask, std::vector<uint8_t>& out, MaskPngScra
   ihdr[11] = 0;  // adaptive filtering (every row uses type 0)
   ihdr[12] = 0;  // no interlace
   appendChunk(out, "IHDR", ihdr);
+  appendChunk(out, "tEXt", kSoftwareText);  // how --force knows the file (checkReplaceable)
 
   const size_t idat = out.size();  // length, type, then the zlib stream
   out.resize(idat + 10);

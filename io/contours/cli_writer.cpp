@@ -88,6 +88,7 @@ std::string sanitizeLabel(const std::string& name) {
 
 void appendHeader(TextBuffer& buf, const ContourJob& job, bool binary) {
   buf.append("$$HEADERSTART\n");
+  buf.append(kCliMarkLine);  // how --force knows the file (checkReplaceable)
   buf.append(binary ? "$$BINARY\n" : "$$ASCII\n");
   buf.append("$$UNITS/00000001.000000\n");
   buf.append("$$VERSION/200\n");

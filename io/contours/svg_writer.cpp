@@ -74,8 +74,9 @@ class SvgWriter final : public ContourSink {
     const double totalWidth = static_cast<double>(columns_) * cellWidth_;
     const double totalHeight = rows > 0 ? static_cast<double>(rows) * cellHeight_ : 2 * margin_;
 
-    std::string s =
-        "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"";
+    std::string s = "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n";
+    s += kSvgMarkLine;  // how --force knows the file (checkReplaceable)
+    s += "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"";
     appendNumber(s, totalWidth, 4);
     s += "mm\" height=\"";
     appendNumber(s, totalHeight, 4);

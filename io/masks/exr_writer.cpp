@@ -23,6 +23,7 @@
 #include "core/prefetch.h"
 #include "io/coders/deflate_runs.h"
 #include "io/errors.h"
+#include "io/output_file.h"
 
 namespace toposlice {
 namespace {
@@ -259,6 +260,8 @@ void encodeExrMaskLayer(const MaskImage& mask, const MaskJob& job, uint32_t inde
   step([&] {
     return exr_add_channel(ctxt, part, kChannel, EXR_PIXEL_HALF, EXR_PERCEPTUALLY_LOGARITHMIC, 1, 1);
   });
+  // How --force knows the file (checkReplaceable).
+  step([&] { return exr_attr_set_string(ctxt, part, "software", kSoftwareName.data()); });
   step([&] { return exr_attr_set_float(ctxt, part, "z", static_cast<float>(z)); });
   step([&] { return exr_attr_set_int(ctxt, part, "layer", static_cast<int32_t>(index)); });
   step([&] { return exr_attr_set_int(ctxt, part, "layerCount", static_cast<int32_t>(job.layerCount)); });

@@ -80,7 +80,7 @@ std::vector<uint8_t> gooHeader(const MaskJob& job, uint32_t layers, const std::v
   h.raw(kVersion, 4);  // 0
   constexpr uint8_t kMagic[8] = {0x07, 0x00, 0x00, 0x00, 0x44, 0x4C, 0x50, 0x00};
   h.raw(kMagic, 8);                    // 1
-  h.text("toposlice", 32);             // 2
+  h.text(kSoftwareName, 32);           // 2: how --force knows the file (checkReplaceable)
   h.text(TOPOSLICE_VERSION_TEXT, 24);  // 3
   const std::time_t created = maskCreationTime(job);
   std::tm t{};

@@ -181,7 +181,7 @@ class VdbSink final : public EncodingMaskSink {
     }
     grid_ = GridT::create();
     openvdb::MetaMap fileMeta;
-    fileMeta.insertMeta("creator", openvdb::StringMetadata("toposlice"));
+    fileMeta.insertMeta("creator", openvdb::StringMetadata(std::string(kSoftwareName)));  // checkReplaceable
     fileMeta.insertMeta("layer_count", openvdb::Int32Metadata(static_cast<int32_t>(job.layerCount)));
     fileMeta.insertMeta("layer_height", openvdb::DoubleMetadata(job.layerHeight));
     fileMeta.insertMeta("pixel_size", openvdb::DoubleMetadata(job.grid.pixel));
