@@ -490,6 +490,54 @@ TEST_F(EmptyResults, InsideOutMeshWithMasksIsAnErrorAndAWarningWithContours) {
   EXPECT_TRUE(fixed.err.empty()) << fixed.err;
 }
 
+// Plate and batch jobs have no --fix-orientation: an inside-out part printed nothing on a plate, without a
+// word. Each inside-out model or feature is a warning naming the part (even with -q), and the jobs'
+// "fix_orientation" setting flips it (in a batch the template model too, whose table the variants meet).
+TEST_F(EmptyResults, InsideOutPartsOfPlateAndBatchJobsAreWarningsAndFlippedOnRequest) {
+  writeBytes(path("box.stl"), boxStl(5, 0, false));
+  writeBytes(path("inv.stl"), boxStl(5, 0, true));
+  const auto plate = [&](const std::string& settings) {
+    writeBytes(path("plate.json"),
+               R"({"version": 1, "printer": "sl1", "settings": {"layer_height": 0.5, "overwrite": true)" +
+                   settings +
+                   R"(}, "parts": [{"name": "right", "model": "box.stl", "placement": "auto"},
+                   {"name": "wrong", "model": "inv.stl", "placement": "auto"}],
+                   "outputs": {"masks": "p.sl1", "report": "p.json"}})");
+    const RunResult r = run({"plate", "plate.json", "-q"});
+    EXPECT_EQ(r.code(), 0) << r.describe();
+    const auto report = nlohmann::json::parse(readBytes(path("p.json")));
+    return std::make_pair(r.err, report["parts"][1]["volume_ml"].get<double>());
+  };
+  const auto [warned, inverted] = plate("");
+  EXPECT_TRUE(contains(warned, "toposlice: warning: part 'wrong': ")) << warned;
+  EXPECT_TRUE(contains(warned, "inv.stl: the mesh is inside out")) << warned;
+  EXPECT_TRUE(contains(warned, "\"fix_orientation\": true")) << warned;
+  EXPECT_FALSE(contains(warned, "part 'right'")) << warned;
+  EXPECT_LT(inverted, 0);
+  const auto [flipped, volume] = plate(R"(, "fix_orientation": true)");
+  EXPECT_TRUE(contains(flipped, "part 'wrong': ")) << flipped;
+  EXPECT_TRUE(contains(flipped, "was inside out (negative volume): flipped")) << flipped;
+  EXPECT_NEAR(volume, 0.125, 0.005);  // the 5 mm cube
+
+  // A batch: the template and the variant both inside out.
+  const auto batch = [&](const std::string& settings) {
+    writeBytes(path("batch.json"), R"({"version": 1, "template": {"model": "inv.stl"},
+                   "settings": {"layer_height": 0.5, "overwrite": true, "printer": "sl1")" +
+                                       settings + R"(},
+                   "variants": [{"name": "v", "model": "inv.stl", "masks": "v.sl1", "report": "v.csv"}]})");
+    return run({"batch", "batch.json", "-q"});
+  };
+  const RunResult refused = batch("");
+  EXPECT_NE(refused.code(), 0);
+  EXPECT_TRUE(contains(refused.err, "inside out")) << refused.err;
+  EXPECT_TRUE(contains(refused.err, "\"fix_orientation\": true")) << refused.err;
+  EXPECT_FALSE(fs::exists(path("v.sl1")));
+  const RunResult fixed = batch(R"(, "fix_orientation": true)");
+  EXPECT_EQ(fixed.code(), 0) << fixed.describe();
+  EXPECT_TRUE(fs::exists(path("v.sl1")));
+  expectNoTemporaries();
+}
+
 TEST_F(EmptyResults, PlanesBelowTheModelAreAWarningEvenWhenQuiet) {
   writeBytes(path("box.stl"), boxStl(2, 3, false));  // z 3 .. 5
   const RunResult r = run({"slice", "box.stl", "-H", "0.5", "--z0", "0", "-o", "b.cli", "-q"});

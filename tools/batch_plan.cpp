@@ -9,6 +9,7 @@
 #include "io/output_file.h"
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
+#include "tools/slice_stages.h"
 
 namespace toposlice {
 
@@ -19,9 +20,11 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     t.source = "loaded " + job.templateFile.string();
   } else if (!job.templateModel.empty()) {
     const ChunkRunner runner = parallelChunkRunner();
-    t.table = buildTemplateTable(
-        weldCorners(readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale}).corners, runner),
-        runner);
+    FacetSoup soup = readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale});
+    // With "fix_orientation" the variants are turned right side out: so is an inside-out template, whose
+    // table they are checked against.
+    if (job.fixOrientation && measureSoup(soup.corners).volume < 0) flipFacets(soup.corners);
+    t.table = buildTemplateTable(weldCorners(soup.corners, runner), runner);
     t.source = "built from " + job.templateModel.string();
     if (save && !job.templateFile.empty()) {
       if (!job.templateFile.parent_path().empty())
@@ -73,6 +76,8 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
     throw InputError("unknown method '" + job.method + "'");
   if (job.joinTolerance) o.slice.joinTolerance = *job.joinTolerance;
   o.overwrite = job.overwrite;
+  o.fixOrientation = job.fixOrientation;
+  o.fixOrientationOption = "\"fix_orientation\": true in the job's settings";
   o.cliBinary = job.cliBinary;
   o.templateTable = &table;
   if (!variant.contours.empty()) o.outputs.push_back(variant.contours);

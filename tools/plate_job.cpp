@@ -152,6 +152,32 @@ void scalePart(LoadedPart& part, const PrintSettings& print) {
   for (FacetSoup& f : part.features) scaleCorners(f.corners, factors, centre);
 }
 
+// An inside-out (negative volume) model or feature of a part: flipped when the job sets
+// "fix_orientation", else a warning, as slice does (an inside-out model prints nothing under the positive
+// rule, an inside-out add-on cuts its model away, a removal adds to it). Returns the warnings.
+std::vector<std::string> fixInsideOutMeshes(const PlateJob& job, const PlatePart& spec, LoadedPart& part) {
+  std::vector<std::string> warnings;
+  const auto check = [&](FacetSoup& soup, const std::filesystem::path& file, const std::string& what) {
+    if (!(measureSoup(soup.corners).volume < 0)) return;
+    const std::string named = "part '" + spec.name + "': " + file.string() + ": the " + what;
+    if (job.fixOrientation) {
+      flipFacets(soup.corners);
+      warnings.push_back(named + " was inside out (negative volume): flipped (\"fix_orientation\")");
+    } else {
+      warnings.push_back(named + " is inside out (negative volume), so it " +
+                         (what == "mesh" ? "prints nothing" : "counts with the opposite sign") +
+                         "; flip it with \"fix_orientation\": true in the job's settings");
+    }
+  };
+  check(part.model, spec.model, "mesh");
+  for (std::size_t f = 0; f < part.features.size(); ++f) {
+    const bool add = f < spec.add.size();
+    check(part.features[f], add ? spec.add[f] : spec.remove[f - spec.add.size()],
+          add ? "add-on feature" : "removal feature");
+  }
+  return warnings;
+}
+
 // The contours of a layer moved by (tx, ty), into `out` (its capacity reused).
 void translateLayer(const LayerContours& in, double tx, double ty, LayerContours& out) {
   out = in;
@@ -556,6 +582,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   std::vector<LoadedPart>& loaded = impl_->loaded;
   loaded.resize(count);
   std::vector<std::string> errors(count);
+  std::vector<std::vector<std::string>> partWarnings(count);
   result.parts.resize(count);
   const double cell = job.cell;
   parallelForChunks(count, 1, [&](std::size_t b, std::size_t e) {
@@ -566,6 +593,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         part.model = readMesh(spec.model, read);
         for (const auto* list : {&spec.add, &spec.remove})
           for (const auto& path : *list) part.features.push_back(readMesh(path, read));
+        partWarnings[p] = fixInsideOutMeshes(job, spec, part);
         if (scalesWhenRead(print)) scalePart(part, print);
         // The footprint covers the model and its add-ons (a removal never widens it).
         std::vector<std::span<const Point3f>> covered = {part.model.corners};
@@ -597,6 +625,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
     if (!errors[p].empty()) failed.push_back("part '" + job.parts[p].name + "': " + errors[p]);
   if (failed.size() == 1) throw InputError(failed[0]);
   if (!failed.empty()) throwProblems(job, std::to_string(failed.size()) + " parts cannot be used", failed);
+  for (auto& w : partWarnings) result.warnings.insert(result.warnings.end(), w.begin(), w.end());
   for (const PlatePartResult& r : result.parts) {
     const bool fromTable = r.topology.starts_with("loaded from template");
     result.templateChecked += fromTable ? 1 : 0;
@@ -814,6 +843,7 @@ int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
     if (empty) std::filesystem::remove_all(made, ec);
     throw;
   }
+  for (const auto& w : r.warnings) std::fprintf(stderr, "toposlice: warning: %s\n", w.c_str());  // even -q
   if (!quiet) printPlateSummary(stdout, r);
   return 0;
 }

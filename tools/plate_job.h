@@ -41,6 +41,7 @@ struct PlateResult {
   uint32_t templateChecked = 0, built = 0;  // parts whose adjacency came from a table / was built
   double readSeconds = 0, topologySeconds = 0, arrangeSeconds = 0, sliceSeconds = 0;
   std::vector<std::filesystem::path> written;
+  std::vector<std::string> warnings;  // one line each, in job order (inside-out meshes)
 };
 
 // The job's printer, material and corrections: its profile file (when given), printer and material, then

@@ -298,6 +298,10 @@ void checkMaskSettings(const PrintSettings& print, bool antialias, bool masks, c
                      antialiasName + " (or gamma_correction > 0)");
 }
 
+void flipFacets(std::span<Point3f> corners) {
+  for (std::size_t c = 0; c + 2 < corners.size(); c += 3) std::swap(corners[c + 1], corners[c + 2]);
+}
+
 SoupMeasures measureSoup(std::span<const Point3f> corners) {
   constexpr std::size_t kBlock = 32768;  // facets
   const std::size_t facets = corners.size() / 3, blocks = (facets + kBlock - 1) / kBlock;
@@ -629,8 +633,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   result.degenerateFacets = measures.degenerateFacets;
   result.inverted = result.volume < 0;
   if (result.inverted && options.fixOrientation) {
-    for (std::size_t c = 0; c < soup.corners.size(); c += 3)
-      std::swap(soup.corners[c + 1], soup.corners[c + 2]);
+    flipFacets(soup.corners);
     for (std::size_t c = 0; c + 2 < welded.facetVertices.size(); c += 3)
       std::swap(welded.facetVertices[c + 1], welded.facetVertices[c + 2]);
     result.flipped = true;
@@ -641,15 +644,15 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (!(measureSoup(features[i].corners).volume < 0)) continue;
     const std::string role = i < options.add.size() ? "add-on" : "removal";
     if (options.fixOrientation) {
-      for (std::size_t c = 0; c < features[i].corners.size(); c += 3)
-        std::swap(features[i].corners[c + 1], features[i].corners[c + 2]);
+      flipFacets(features[i].corners);
       result.warnings.push_back(featurePaths[i].string() + ": the " + role +
-                                " feature was inside out (negative volume): flipped (--fix-orientation)");
+                                " feature was inside out (negative volume): flipped (" +
+                                options.fixOrientationOption + ")");
     } else {
       result.warnings.push_back(
           featurePaths[i].string() + ": the " + role +
-          " feature is inside out (negative volume), so it counts with the opposite sign; "
-          "slice with --fix-orientation to flip it");
+          " feature is inside out (negative volume), so it counts with the opposite sign; flip it with " +
+          options.fixOrientationOption);
     }
   }
 
@@ -874,9 +877,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (result.stats.cancelled) throw InputError("interrupted");
   result.volumeMl = volumeMm3 / 1000.0;
   if (result.inverted && !result.flipped)
-    result.warnings.push_back(
-        model.string() +
-        ": the mesh is inside out (negative volume); slice with --fix-orientation to flip it");
+    result.warnings.push_back(model.string() + ": the mesh is inside out (negative volume); flip it with " +
+                              options.fixOrientationOption);
   // Results that hold nothing are refused before any output appears.
   if (result.stats.loops == 0 && result.stats.openPolylines == 0)
     throw InputError(model.string() + ": every one of the " + std::to_string(planes.size()) +
@@ -884,7 +886,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (masks && !(litArea > 0))
     throw InputError(model.string() + ": every mask layer is dark: nothing would print" +
                      (result.inverted && !result.flipped
-                          ? " (the mesh is inside out: slice with --fix-orientation)"
+                          ? " (the mesh is inside out: flip it with " + options.fixOrientationOption + ")"
                           : " (the contours enclose no area on the pixel grid)"));
   for (auto& sink : sinks) sink->finish();
   if (maskSink) {

@@ -47,6 +47,9 @@ struct SliceJobOptions {
   std::filesystem::path templateFile;            // or the table's file, read while the model is read
   bool rebuildOnMismatch = false;                // a variant that does not match: rebuild instead of failing
   bool fixOrientation = false;                   // flip every facet of an inside-out (negative volume) mesh
+  // How the user asks for fixOrientation, for the warnings that advise it: the option on slice's
+  // command line, the setting in a batch job.
+  std::string fixOrientationOption = "--fix-orientation";
   MaskOptions masks;
   // Printer and material settings (io/jobs/profile.h), resolved: exposure for the printer files, the
   // corrections applied to the geometry, gamma and light map applied to the masks.

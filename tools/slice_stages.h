@@ -84,6 +84,9 @@ struct SoupMeasures {
 };
 SoupMeasures measureSoup(std::span<const Point3f> corners);
 
+// Turns every facet of a soup over (its second and third corners swapped): an inside-out mesh made right.
+void flipFacets(std::span<Point3f> corners);
+
 // Per-pipeline-slot buffers of the mask stage: the layer's contour sets, the rasterizer's scratch, the
 // mask, and the encoder's scratch (reused from layer to layer).
 struct MaskSlotScratch {

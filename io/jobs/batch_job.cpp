@@ -66,10 +66,11 @@ class JobParser : public JsonReader {
     const std::string at = "settings";
     if (v == nullptr) fail(at, "missing (required: the slicing planes, layer_height, layers or z)");
     object(*v, at);
-    checkKeys(*v, at,
-              {"layer_height", "layers", "z0",         "z",       "method",    "join_tolerance", "printer",
-               "pixel",        "origin", "resolution", "mirror",  "antialias", "cli_binary",     "threads",
-               "overwrite",    "units",  "scale",      "profile", "material",  "print_settings"});
+    checkKeys(*v, at, {"layer_height",   "layers",    "z0",         "z",        "method",
+                       "join_tolerance", "printer",   "pixel",      "origin",   "resolution",
+                       "mirror",         "antialias", "cli_binary", "threads",  "overwrite",
+                       "units",          "scale",     "profile",    "material", "print_settings",
+                       "fix_orientation"});
     const auto key = [&](std::string_view k) { return childPath(at, k); };
     if (const Json* x = find(*v, "layer_height")) job_.layerHeight = positive(*x, key("layer_height"));
     if (const Json* x = find(*v, "layers")) {
@@ -124,6 +125,8 @@ class JobParser : public JsonReader {
     if (const Json* x = find(*v, "threads"))
       job_.threads = static_cast<uint32_t>(whole(*x, key("threads"), 0, 4096));
     if (const Json* x = find(*v, "overwrite")) job_.overwrite = boolean(*x, key("overwrite"));
+    if (const Json* x = find(*v, "fix_orientation"))
+      job_.fixOrientation = boolean(*x, key("fix_orientation"));
     if (const Json* x = find(*v, "units")) job_.unitMm = unitsMm(*x, key("units"));
     if (const Json* x = find(*v, "scale")) job_.scale = positive(*x, key("scale"));
     if (const Json* x = find(*v, "profile")) job_.profile = input(*x, key("profile"));

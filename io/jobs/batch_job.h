@@ -57,6 +57,7 @@ struct BatchJob {
   bool cliBinary = false;              // .cli contours in binary CLI (else ASCII)
   uint32_t threads = 0;                // 0: all cores
   bool overwrite = false;              // replace existing outputs
+  bool fixOrientation = false;         // "fix_orientation": flip inside-out meshes (slice --fix-orientation)
   std::optional<double> unitMm;        // "units": mm per file unit of the meshes (mm, cm, m, in)
   double scale = 1.0;                  // "scale": multiplies every coordinate after units
   std::vector<BatchVariant> variants;  // at least one

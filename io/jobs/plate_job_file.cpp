@@ -75,7 +75,7 @@ class PlateParser : public JsonReader {
     const std::string at = "settings";
     checkKeys(v, at,
               {"layer_height", "z0", "method", "pixel", "resolution", "build_height", "mirror", "antialias",
-               "cli_binary", "threads", "overwrite", "units", "scale", "allow_rebuild"});
+               "cli_binary", "threads", "overwrite", "units", "scale", "allow_rebuild", "fix_orientation"});
     const auto key = [&](std::string_view k) { return childPath(at, k); };
     if (const Json* x = find(v, "layer_height")) job_.layerHeight = positive(*x, key("layer_height"));
     if (const Json* x = find(v, "z0")) job_.z0 = number(*x, key("z0"));
@@ -104,6 +104,7 @@ class PlateParser : public JsonReader {
     if (const Json* x = find(v, "units")) job_.unitMm = unitsMm(*x, key("units"));
     if (const Json* x = find(v, "scale")) job_.scale = positive(*x, key("scale"));
     if (const Json* x = find(v, "allow_rebuild")) job_.allowRebuild = boolean(*x, key("allow_rebuild"));
+    if (const Json* x = find(v, "fix_orientation")) job_.fixOrientation = boolean(*x, key("fix_orientation"));
   }
 
   double nonNegative(const Json& v, const std::string& at) const {

@@ -46,6 +46,7 @@ struct PlateJob {
   std::string method;                                 // "sr", "sr-lazy", "cp"; empty: default
   std::optional<bool> mirrorX, mirrorY;
   bool antialias = false, cliBinary = false, overwrite = false, allowRebuild = false;
+  bool fixOrientation = false;  // flip inside-out (negative volume) models and features
   uint32_t threads = 0;
   std::optional<double> unitMm;
   double scale = 1.0;
