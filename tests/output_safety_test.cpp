@@ -582,6 +582,12 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
     EXPECT_TRUE(contains(r.err, named)) << testing::PrintToString(args) << "\n" << r.err;
     EXPECT_FALSE(fs::exists(path("a.cli")));
   }
+  // Planes out of order name --z, not the model, and before the model is read (a missing one here).
+  for (const char* z : {"3,1,2", "1,1"}) {
+    const RunResult r = run({"slice", "missing.stl", "-o", "a.cli", "--z", z});
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, "toposlice: error: --z: the planes must be strictly increasing")) << r.err;
+  }
   const RunResult wrapped =
       run({"preview", examplePart().string(), "-o", "p.png", "--size", "4294967297x10", "-q"});
   EXPECT_NE(wrapped.code(), 0) << wrapped.describe();

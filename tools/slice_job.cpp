@@ -425,6 +425,15 @@ void validateSliceOptions(const SliceJobOptions& options) {
     throw InputError("--z0 " + formatNumber(*options.planes.z0) + ": expected a finite height in mm");
   if (options.planes.layers && *options.planes.layers == 0)
     throw InputError("--layers 0: expected at least 1");
+  // Checked here, before the model is read, so that the message names --z rather than the model.
+  const std::vector<double>& z = options.planes.explicitZ;
+  for (std::size_t i = 0; i < z.size(); ++i) {
+    if (!std::isfinite(z[i]))
+      throw InputError("--z: " + formatNumber(z[i]) + " is not a finite height in mm");
+    if (i > 0 && !(z[i] > z[i - 1]))
+      throw InputError("--z: the planes must be strictly increasing (" + formatNumber(z[i - 1]) + " then " +
+                       formatNumber(z[i]) + ")");
+  }
   if (options.masks.pixel && !(std::isfinite(*options.masks.pixel) && *options.masks.pixel > 0))
     throw InputError("--pixel " + formatNumber(*options.masks.pixel) + ": expected a pixel size > 0 mm");
   if (options.masks.origin &&
