@@ -5,6 +5,7 @@
 # loopback TCP only; the outputs must be byte-identical, the failure reported, the exit status 1 in both.
 # Then one output is deleted and the MPI job run again: only that variant is sliced, the result is
 # identical again. Also -np 1 against the single runner.
+# Then the warnings of variants sliced on other ranks reach rank 0's stderr (with --quiet too).
 # Then a plate job (the bundled plate example on a small plate, so that it spills over to 4 plates):
 # `toposlice-mpi plate` on 2 and 3 ranks writes the same bytes as `toposlice plate` (the report too, but
 # for its seconds); an output in the way and overlapping placements fail with one error and leave
@@ -143,6 +144,33 @@ rc_c=$?
 check "1 rank exits 1, got $rc_c" test "$rc_c" -eq 1
 check "1 rank: outputs byte-identical to the single process" same_outputs "$tmp/A" "$tmp/C"
 check "1 rank: every variant on rank 0" test "$(awk '$2 == ":" && $3 == "ok" { print $7 }' "$tmp/C.log" | sort -u)" = 0
+
+# Warnings travel to rank 0: inside-out variants (the example part turned over, with its own table) are
+# a warning each, naming the variant, even with --quiet, from whichever rank sliced them.
+mkdir -p "$tmp/W"
+python3 - "$repo/examples/example_part.stl" "$tmp/W/inv.stl" <<'PY'
+import struct, sys
+d = open(sys.argv[1], 'rb').read()
+n = struct.unpack('<I', d[80:84])[0]
+out = bytearray(d[:84])
+for i in range(n):
+    r = d[84 + 50 * i:134 + 50 * i]
+    out += r[0:12] + r[12:24] + r[36:48] + r[24:36] + r[48:50]
+open(sys.argv[2], 'wb').write(out)
+PY
+cat >"$tmp/W/job.json" <<'JSON'
+{"version": 1, "template": {"model": "inv.stl"}, "settings": {"layer_height": 0.5},
+ "variants": [{"name": "turned1", "model": "inv.stl", "contours": "w1.cli"},
+              {"name": "turned2", "model": "inv.stl", "contours": "w2.cli"},
+              {"name": "turned3", "model": "inv.stl", "contours": "w3.cli"}]}
+JSON
+timeout 300 mpirun --allow-run-as-root --oversubscribe --bind-to none -np 2 \
+  --mca btl self,tcp --mca btl_tcp_if_include lo --mca oob_tcp_if_include lo \
+  "$mpi" batch "$tmp/W/job.json" --quiet >"$tmp/W.out" 2>"$tmp/W.err"
+rc_w=$?
+check "warnings: 2 ranks exit 0, got $rc_w" test "$rc_w" -eq 0
+check "warnings: one per variant on stderr with --quiet" test \
+  "$(grep -c "^toposlice-mpi: warning: variant 'turned[123]': .*inv.stl: the mesh is inside out" "$tmp/W.err")" -eq 3
 
 # A plate job: the four arches of examples/plate on a 70 x 40 mm plate, one arch per plate, with print
 # settings (scaling along the plate's x, absolute correction, elephant foot, exposure). The same job

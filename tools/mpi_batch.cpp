@@ -13,8 +13,8 @@
 // queues the rest by size on disk, largest first, so the long ones start early and the short ones fill
 // the gaps at the end. A worker rank asks for work with a message on kTagRequest: "ready" (its first
 // request, after its table loaded), or the result of its previous variant (index, status, seconds,
-// layers, message), which is also its next request; or "setup failed" with the reason, after which it
-// gets nothing. Rank 0 answers every request with one int64 on kTagWork: a variant index, or kStop.
+// layers, message, warnings), which is also its next request; or "setup failed" with the reason, after which
+// it gets nothing. Rank 0 answers every request with one int64 on kTagWork: a variant index, or kStop.
 //
 // Rank 0 works too: a second thread on rank 0 takes variants from the same queue and slices them,
 // while rank 0's main thread is the dispatcher (the only thread that calls MPI, so MPI_THREAD_FUNNELED
@@ -79,14 +79,16 @@ constexpr std::size_t kMaxDetail = 16 * 1024;  // longer messages are cut
 
 enum class Kind : int32_t { Ready = 0, Result = 1, SetupFailed = 2 };
 
-// A request as bytes: fixed header, then the message text. All ranks run the same build, so the
-// header travels as raw bytes (no heterogeneous clusters).
+// A request as bytes: fixed header, the message text (detailBytes), then the variant's warnings, each
+// ended by a line feed (a warning is one line). All ranks run the same build, so the header travels as
+// raw bytes (no heterogeneous clusters).
 struct WireHeader {
   int32_t kind = 0;
   int32_t failed = 0;
   int64_t index = -1;
   double seconds = 0;
   uint64_t layers = 0;
+  uint64_t detailBytes = 0;
 };
 
 std::vector<char> encode(Kind kind, int64_t index, const BatchOutcome& o) {
@@ -96,17 +98,32 @@ std::vector<char> encode(Kind kind, int64_t index, const BatchOutcome& o) {
   h.index = index;
   h.seconds = o.seconds;
   h.layers = o.layers;
-  const std::size_t n = std::min(o.detail.size(), kMaxDetail);
-  std::vector<char> bytes(sizeof h + n);
+  h.detailBytes = std::min(o.detail.size(), kMaxDetail);
+  std::vector<char> bytes(sizeof h);
   std::memcpy(bytes.data(), &h, sizeof h);
-  if (n > 0) std::memcpy(bytes.data() + sizeof h, o.detail.data(), n);
+  bytes.insert(bytes.end(), o.detail.begin(), o.detail.begin() + static_cast<std::ptrdiff_t>(h.detailBytes));
+  for (const std::string& w : o.warnings) {
+    bytes.insert(bytes.end(), w.begin(),
+                 w.begin() + static_cast<std::ptrdiff_t>(std::min(w.size(), kMaxDetail)));
+    bytes.push_back('\n');
+  }
   return bytes;
 }
 
-bool decode(const std::vector<char>& bytes, WireHeader& h, std::string& detail) {
+bool decode(const std::vector<char>& bytes, WireHeader& h, std::string& detail,
+            std::vector<std::string>& warnings) {
   if (bytes.size() < sizeof h) return false;
   std::memcpy(&h, bytes.data(), sizeof h);
-  detail.assign(bytes.data() + sizeof h, bytes.size() - sizeof h);
+  if (h.detailBytes > bytes.size() - sizeof h) return false;
+  const char* text = bytes.data() + sizeof h;
+  detail.assign(text, h.detailBytes);
+  const std::string rest(text + h.detailBytes, bytes.data() + bytes.size());
+  for (std::size_t at = 0; at < rest.size();) {
+    const std::size_t end = rest.find('\n', at);
+    if (end == std::string::npos) return false;
+    warnings.push_back(rest.substr(at, end - at));
+    at = end + 1;
+  }
   return true;
 }
 
@@ -272,6 +289,9 @@ int runDispatcher(const Options& options, int size, int provided) {
   std::size_t finished = 0;
   auto record = [&](std::size_t i, BatchOutcome o) {
     ++finished;
+    for (const std::string& w : o.warnings)  // never hidden by --quiet, as in toposlice batch
+      std::fprintf(stderr, "toposlice-mpi: warning: variant '%s': %s\n", job.variants[i].name.c_str(),
+                   w.c_str());
     if (!options.quiet)
       std::fprintf(stderr, "toposlice-mpi: [%zu/%zu] %s %s in %.2f s on rank %d%s%s\n", finished, toSlice,
                    job.variants[i].name.c_str(), o.status.c_str(), o.seconds, o.rank,
@@ -340,7 +360,8 @@ int runDispatcher(const Options& options, int size, int provided) {
     MPI_Recv(bytes.data(), count, MPI_BYTE, source, kTagRequest, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
     WireHeader h;
     std::string detail;
-    if (!decode(bytes, h, detail)) {
+    std::vector<std::string> warnings;
+    if (!decode(bytes, h, detail, warnings)) {
       std::fprintf(stderr, "toposlice-mpi: error: rank %d sent a malformed request\n", source);
       MPI_Abort(MPI_COMM_WORLD, 2);
     }
@@ -359,6 +380,7 @@ int runDispatcher(const Options& options, int size, int provided) {
       o.seconds = h.seconds;
       o.layers = h.layers;
       o.rank = source;
+      o.warnings = std::move(warnings);
       record(static_cast<std::size_t>(h.index), std::move(o));
     }
     const auto next = queue.pop();
@@ -675,6 +697,8 @@ int runPlateRank(const Options& options, int rank, int size) {
       status = 1;
     }
   }
+  if (status == 0)  // every rank prepared the same parts: rank 0 says their warnings, even with -q
+    for (const auto& w : result.warnings) std::fprintf(stderr, "toposlice-mpi: warning: %s\n", w.c_str());
   if (status == 0 && !options.quiet) {
     printPlateSummary(stdout, result);
     std::printf("ranks: %d x %u threads;", size, ThreadLimit::available());
