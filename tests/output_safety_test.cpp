@@ -813,6 +813,18 @@ TEST_F(Summary, JsonSummaryHasTheCountsVolumeAndOutputs) {
   EXPECT_TRUE(j["warnings"].empty());
   // The CSV is plain rows (no trailer), and the SL1 carries the layer height as given.
   for (const auto& line : splitLines(readBytes(path("r.csv")))) EXPECT_FALSE(line.starts_with("#")) << line;
+  EXPECT_EQ(j["defects"]["boundary_edges"], 0);  // the adjacency was built: counted
+
+  // With a template's table the model's edges are not counted: null, not a clean 0.
+  ASSERT_EQ(run({"template", examplePart().string(), "-o", "t.topo", "-q"}).code(), 0);
+  ASSERT_EQ(run({"slice", examplePart().string(), "--template", "t.topo", "-H", "1", "-o", "t.cli",
+                 "--summary", "t.json", "-q"})
+                .code(),
+            0);
+  const auto t = nlohmann::json::parse(readBytes(path("t.json")));
+  EXPECT_TRUE(contains(t["topology"].get<std::string>(), "template")) << t["topology"];
+  for (const char* k : {"boundary_edges", "non_manifold_edges", "inconsistent_edges"})
+    EXPECT_TRUE(t["defects"][k].is_null()) << k << " " << t["defects"];
 }
 
 TEST_F(Summary, Sl1NumbersReadBackAsGiven) {

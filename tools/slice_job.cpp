@@ -102,6 +102,7 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
   }
   if (build) {
     buildTable(soup, built, &result.edges, welded);
+    result.edgesCounted = true;
     if (result.topology.empty()) result.topology = "built (weld + adjacency)";
     return built;
   }
@@ -513,9 +514,11 @@ static void writeSliceSummary(OutputFile& file, const std::filesystem::path& mod
                  {"layer_height_mm", nominalLayerHeight(options.planes, planes, r.bounds.min.z)}};
   j["contours"] = {
       {"segments", r.stats.segments}, {"loops", r.stats.loops}, {"open_polylines", r.stats.openPolylines}};
-  j["defects"] = {{"boundary_edges", r.edges.boundary},
-                  {"non_manifold_edges", r.edges.nonManifold},
-                  {"inconsistent_edges", r.edges.inconsistent}};
+  // Counted only where the adjacency was built: null (not 0) after a template's table or for cp / sr-lazy.
+  const auto counted = [&](uint64_t n) { return r.edgesCounted ? nlohmann::ordered_json(n) : nullptr; };
+  j["defects"] = {{"boundary_edges", counted(r.edges.boundary)},
+                  {"non_manifold_edges", counted(r.edges.nonManifold)},
+                  {"inconsistent_edges", counted(r.edges.inconsistent)}};
   j["repairs"] = {{"degenerate_facets_skipped", r.degenerateFacets},
                   {"gaps_bridged", r.stats.gaps.joins},
                   {"close_gaps_mm", options.slice.closeGaps},

@@ -68,6 +68,7 @@ struct SliceJobResult {
   BoundingBox bounds;
   std::string topology;           // how the adjacency was obtained, for the summary
   EdgeStats edges;                // when built here
+  bool edgesCounted = false;      // the adjacency was built here, so `edges` counts the model's defects
   uint64_t degenerateFacets = 0;  // skipped
   double volume = 0;              // signed, before any fix (after the scaling correction)
   bool inverted = false, flipped = false;
