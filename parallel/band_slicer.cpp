@@ -182,6 +182,9 @@ BandPlan planBands(std::size_t layerCount, const SliceSettings& settings) {
   const std::size_t threads = std::max(1u, ThreadLimit::available());
   uint32_t band = settings.bandLayers;
   if (band == 0) band = std::clamp<uint32_t>(static_cast<uint32_t>(layerCount / (threads * 8)), 8, 16);
+  // A band never holds more layers than the job has: the per-band storage is sized by it (a given
+  // --band-layers of 10^8 on a 20-layer job allocated gigabytes for nothing).
+  band = static_cast<uint32_t>(std::min<std::size_t>(band, std::max<std::size_t>(layerCount, 1)));
   const std::size_t bands = std::max<std::size_t>(1, (layerCount + band - 1) / band);
   return {band, std::min<std::size_t>(bands, 2 * threads)};
 }

@@ -7,10 +7,27 @@
 #include <thread>
 #include <vector>
 
+#include "parallel/band_slicer.h"
 #include "parallel/parallel.h"
 
 namespace toposlice {
 namespace {
+
+// A band holds at most the job's layers: --band-layers 100000000 on a 20-layer job sized its storage by
+// the option (3.4 GB, then an out-of-memory kill at 10^8).
+TEST(BandPlan, ABandNeverHoldsMoreLayersThanTheJob) {
+  SliceSettings settings;
+  for (const uint32_t given : {100000000u, 21u, 20u}) {
+    settings.bandLayers = given;
+    const BandPlan plan = planBands(20, settings);
+    EXPECT_EQ(plan.bandLayers, 20u) << given;
+    EXPECT_EQ(plan.slots, 1u) << given;
+  }
+  settings.bandLayers = 7;
+  EXPECT_EQ(planBands(20, settings).bandLayers, 7u);
+  settings.bandLayers = 5;
+  EXPECT_EQ(planBands(0, settings).bandLayers, 1u);
+}
 
 TEST(BackgroundTask, RunsTheWorkOnAnyThreadCount) {
   for (const unsigned threads : {1u, 2u, 4u}) {
