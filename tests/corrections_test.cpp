@@ -980,7 +980,36 @@ TEST_F(CorrectionsCli, BadSettingsAreNamed) {
   const RunResult material =
       this->run({"slice", examplePart().string(), "-o", path("a.cli").string(), "--material", "nope"});
   expectOneErrorLine(material);
-  EXPECT_NE(material.err.find("unknown material 'nope' (known: default)"), std::string::npos) << material.err;
+  EXPECT_NE(material.err.find("--material: unknown material 'nope' (known: default)"), std::string::npos)
+      << material.err;
+}
+
+// A batch job's unknown printer or material is refused before its template table is built and saved
+// (every variant failed on it afterwards, the table left behind), naming the job file and the key; a
+// plate job's likewise.
+TEST_F(CorrectionsCli, JobsNameTheirUnknownPrinterOrMaterialBeforeAnyWork) {
+  const std::string part = examplePart().string();
+  for (const std::string settings : {R"("printer": "sl1x")", R"("printer": "sl1", "material": "resinA")"}) {
+    tool_test::writeBytes(path("job.json"),
+                          R"({"version": 1, "template": {"model": ")" + part +
+                              R"(", "table": "out/t.topo"}, "settings": {"layer_height": 0.5, )" + settings +
+                              R"(}, "variants": [{"name": "a", "model": ")" + part +
+                              R"(", "masks": "out/a.sl1"}]})");
+    const RunResult r = this->run({"batch", path("job.json").string()});
+    expectOneErrorLine(r);
+    const std::string key = tool_test::contains(settings, "sl1x")
+                                ? "settings.printer: unknown printer 'sl1x'"
+                                : "settings.material: unknown material 'resinA'";
+    EXPECT_NE(r.err.find("job.json: " + key), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(path("out/t.topo"))) << "the table was built and saved first";
+  }
+  tool_test::writeBytes(path("plate.json"),
+                        R"({"version": 1, "printer": "sl9", "settings": {"layer_height": 0.5},
+      "parts": [{"name": "p", "model": ")" +
+                            part + R"(", "placement": "auto"}], "outputs": {"masks": "p.sl1"}})");
+  const RunResult plate = this->run({"plate", path("plate.json").string()});
+  expectOneErrorLine(plate);
+  EXPECT_NE(plate.err.find("plate.json: printer: unknown printer 'sl9'"), std::string::npos) << plate.err;
 }
 
 }  // namespace

@@ -14,6 +14,9 @@
 namespace toposlice {
 
 BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesystem::path& jobPath, bool save) {
+  // The printer, material and profile first: a typo there fails at once, before a table is built and
+  // saved and every variant then fails on it.
+  batchJobSettings(job);
   BatchTemplate t;
   if (!job.templateFile.empty() && std::filesystem::exists(job.templateFile)) {
     t.table = readTemplateFile(job.templateFile);
@@ -57,8 +60,9 @@ bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
 }
 
 PrintSettings batchJobSettings(const BatchJob& job) {
-  return resolvePrintSettings(
-      {job.profile, job.printer, job.material, job.printSettings, "batch job print_settings"});
+  return resolvePrintSettings({job.profile, job.printer, job.material, job.printSettings,
+                               "batch job print_settings", job.sourceFile.string() + ": settings.printer",
+                               job.sourceFile.string() + ": settings.material"});
 }
 
 SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,

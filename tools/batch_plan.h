@@ -28,7 +28,8 @@ struct BatchTemplate {
 
 // Loads the job's table file when it exists; otherwise builds the table from the template model and,
 // when `save` and the job names a table file, saves it there (creating its folder). Throws InputError
-// naming jobPath when there is neither a table file nor a model to build it from.
+// naming jobPath when there is neither a table file nor a model to build it from, and, before anything
+// is read, as batchJobSettings when the job's printer, material, profile or print_settings are bad.
 BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesystem::path& jobPath, bool save);
 
 // The variant's output paths (contours, masks, report; those given), in that order.

@@ -656,7 +656,8 @@ int run(int argc, char** argv) {
         throw InputError("--origin '" + origin + "': expected X,Y in mm");
       options.masks.origin = std::pair<double, double>{x, y};
     }
-    ProfileChoice choice{profilePath, options.masks.printer, material, {}, "command line"};
+    ProfileChoice choice{profilePath,    options.masks.printer, material,    {},
+                         "command line", "--printer",           "--material"};
     for (std::size_t i = 0; i < keys.size(); ++i)
       if (slice->count(keyOptions[i]) > 0) choice.overrides.emplace_back(keys[i].name, keyValues[i]);
     for (const std::string& assignment : setAssignments) {

@@ -539,8 +539,9 @@ struct PreparedPlateJob::Impl {
 };
 
 PrintSettings plateJobSettings(const PlateJob& job) {
-  return resolvePrintSettings(
-      {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings"});
+  return resolvePrintSettings({job.profile, job.printer, job.material, job.printSettings,
+                               "plate job print_settings", job.sourceFile.string() + ": printer",
+                               job.sourceFile.string() + ": material"});
 }
 
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {

@@ -234,7 +234,7 @@ ProfileFile readProfileFile(const std::filesystem::path& file) {
   ProfileFile profile{file, {}};
   try {
     profile.root = Json::parse(buffer.str());
-  } catch (const nlohmann::json::parse_error& e) {
+  } catch (const nlohmann::json::exception& e) {  // parse errors, and out_of_range 406: a number too large
     throw InputError(file.string() + ": invalid JSON: " + e.what());
   }
   if (!profile.root.is_object()) throw InputError(file.string() + ": expected a JSON object at the top");
@@ -428,14 +428,27 @@ PrintSettings resolvePrintSettings(const ProfileChoice& choice) {
   if (!choice.file.empty()) file = readProfileFile(choice.file);
   const ProfileFile* f = file ? &*file : nullptr;
   PrintSettings settings;
+  // A name that is neither in the file nor built in is reported where it was given.
+  const auto apply = [&](SettingOwner owner, const std::string& name, const std::string& where) {
+    try {
+      applyProfile(settings, f, owner, name, 0);
+    } catch (const InputError& e) {
+      const std::string message = e.what();
+      const bool unknownHere = message.starts_with(
+          std::string(owner == SettingOwner::Printer ? "unknown printer '" : "unknown material '") + name +
+          "'");
+      if (!unknownHere || where.empty()) throw;
+      throw InputError(where + ": " + message);
+    }
+  };
   std::string printer = choice.printer.empty() ? onlyEntry(f, "printers") : choice.printer;
   if (!printer.empty()) {
-    applyProfile(settings, f, SettingOwner::Printer, printer, 0);
+    apply(SettingOwner::Printer, printer, choice.printer.empty() ? std::string() : choice.printerWhere);
     settings.printerName = printer;
   }
   std::string material = choice.material.empty() ? onlyEntry(f, "materials") : choice.material;
   if (material.empty()) material = "default";
-  applyProfile(settings, f, SettingOwner::Material, material, 0);
+  apply(SettingOwner::Material, material, choice.material.empty() ? std::string() : choice.materialWhere);
   settings.materialName = material;
   for (const auto& [key, value] : choice.overrides)
     assignSetting(settings, key, value, choice.overrideOrigin);

@@ -102,6 +102,9 @@ struct ProfileChoice {
   std::string material;        // preset or profile name; empty: the file's only material, or "default"
   std::vector<std::pair<std::string, std::string>> overrides;
   std::string overrideOrigin = "command line";
+  // Where the printer and material names were given ("--printer", "job.json: settings.printer"): an
+  // unknown name is reported there. Empty: the message names no place.
+  std::string printerWhere, materialWhere;
 };
 
 // Resolves the settings (order above). Throws InputError for an unknown printer or material (naming the
