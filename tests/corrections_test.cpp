@@ -984,6 +984,27 @@ TEST_F(CorrectionsCli, BadSettingsAreNamed) {
       << material.err;
 }
 
+// A line break in a setting or a profile's name went into config.ini and prusaslicer.ini as it was, so a
+// value could add a line of its own ("SL1S\nexpTime = 77"): refused, in one message line.
+TEST_F(CorrectionsCli, ControlCharactersInSettingsAndNamesAreRefused) {
+  const std::string part = examplePart().string();
+  const std::vector<std::string> sl1{"slice", part, "-H", "0.5", "--masks", path("m.sl1").string(), "-q"};
+  const auto refused = [&](std::vector<std::string> extra, const std::string& message) {
+    std::vector<std::string> args = sl1;
+    args.insert(args.end(), extra.begin(), extra.end());
+    const RunResult r = this->run(args);
+    expectOneErrorLine(r);
+    EXPECT_NE(r.err.find(message), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(path("m.sl1")));
+  };
+  refused({"--printer", "sl1", "--printer-model", "SL1S\nexpTime = 77"},
+          "printer_model 'SL1S\\nexpTime = 77'");
+  refused({"--printer", "sl1", "--set", "printer_model=SL1\rx"}, "control characters");
+  refused({"--printer", "sl1", "--material", "x\ny"}, "--material: 'x\\ny'");
+  tool_test::writeBytes(path("p.json"), "{\"printers\": {\"lab\\nexpTime = 77\": {\"inherits\": \"sl1\"}}}");
+  refused({"--profile", path("p.json").string()}, "p.json: printers: the name 'lab\\nexpTime = 77'");
+}
+
 // A batch job's unknown printer or material is refused before its template table is built and saved
 // (every variant failed on it afterwards, the table left behind), naming the job file and the key; a
 // plate job's likewise.

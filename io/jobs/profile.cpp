@@ -167,6 +167,38 @@ const SettingKey* findKey(std::string_view name) {
   return nullptr;
 }
 
+// Whether `text` holds a control character (a line break, a tab, DEL): never in a setting or a profile
+// name, which go into line-based files (config.ini, prusaslicer.ini) and one-line messages.
+bool hasControlCharacter(std::string_view text) {
+  return std::any_of(text.begin(), text.end(), [](char c) {
+    const auto u = static_cast<unsigned char>(c);
+    return u < 0x20 || u == 0x7f;
+  });
+}
+
+// `text` for a one-line message: control characters written as \n, \r, \t or \xNN.
+std::string printable(std::string_view text) {
+  std::string out;
+  for (const char c : text) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u >= 0x20 && u != 0x7f) {
+      out += c;
+    } else if (c == '\n') {
+      out += "\\n";
+    } else if (c == '\r') {
+      out += "\\r";
+    } else if (c == '\t') {
+      out += "\\t";
+    } else {
+      static constexpr char kHex[] = "0123456789abcdef";
+      out += "\\x";
+      out += kHex[u >> 4];
+      out += kHex[u & 15];
+    }
+  }
+  return out;
+}
+
 std::string unknownKeyMessage(std::string_view key) {
   const SettingKey* nearest = nullptr;
   std::size_t best = 4;
@@ -244,6 +276,11 @@ ProfileFile readProfileFile(const std::filesystem::path& file) {
                        "' (expected printers, materials, description)");
     if (key != "description" && !value.is_object())
       throw InputError(file.string() + ": " + key + ": expected an object of named profiles");
+    if (key != "description")
+      for (const auto& [name, entry] : value.items())
+        if (hasControlCharacter(name) || name.empty())
+          throw InputError(file.string() + ": " + key + ": the name '" + printable(name) +
+                           "' is empty or holds a control character (names go into the printer files)");
   }
   return profile;
 }
@@ -298,7 +335,7 @@ void applyProfile(PrintSettings& settings, const ProfileFile* file, SettingOwner
       std::string known = printerNames();
       if (file && file->root.contains("printers"))
         for (const auto& [n, v] : file->root["printers"].items()) known += ", " + n;
-      throw InputError("unknown printer '" + name + "' (known: " + known + ")");
+      throw InputError("unknown printer '" + printable(name) + "' (known: " + known + ")");
     }
     for (const auto& [key, value] : printerPreset(*preset))
       assignSetting(settings, key, value, "printer " + std::string(preset->name));
@@ -315,7 +352,7 @@ void applyProfile(PrintSettings& settings, const ProfileFile* file, SettingOwner
   std::string known = builtInMaterialNames();
   if (file && file->root.contains("materials"))
     for (const auto& [n, v] : file->root["materials"].items()) known += ", " + n;
-  throw InputError("unknown material '" + name + "' (known: " + known + ")");
+  throw InputError("unknown material '" + printable(name) + "' (known: " + known + ")");
 }
 
 // The file's only entry of a section, if it has exactly one.
@@ -384,7 +421,11 @@ void assignSetting(PrintSettings& settings, std::string_view key, std::string_vi
                    const std::string& origin) {
   if (findKey(key) == nullptr) throw InputError(origin + ": " + unknownKeyMessage(key));
   const KeyRule rule = ruleOf(key);
-  const std::string where = origin + ": " + std::string(key) + " '" + std::string(value) + "'";
+  const std::string where = origin + ": " + std::string(key) + " '" + printable(value) + "'";
+  // A line break in printer_model would start another key = value line in config.ini (an exposure the
+  // user never set): refused, as every control character.
+  if (hasControlCharacter(value))
+    throw InputError(where + ": a setting is one line without control characters");
   switch (rule.kind) {
     case Kind::Number:
     case Kind::Count: {
@@ -424,6 +465,11 @@ void assignSetting(PrintSettings& settings, std::string_view key, std::string_vi
 }
 
 PrintSettings resolvePrintSettings(const ProfileChoice& choice) {
+  for (const auto& [name, where] :
+       {std::pair{&choice.printer, &choice.printerWhere}, std::pair{&choice.material, &choice.materialWhere}})
+    if (hasControlCharacter(*name))
+      throw InputError((where->empty() ? std::string() : *where + ": ") + "'" + printable(*name) +
+                       "': a printer or material name holds no control characters");
   std::optional<ProfileFile> file;
   if (!choice.file.empty()) file = readProfileFile(choice.file);
   const ProfileFile* f = file ? &*file : nullptr;
