@@ -7,7 +7,7 @@
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]
 #
 # Environment (all optional):
-#   FUZZ_TARGETS     targets to run, default "stl template batch_job plate_job ply mesh gunzip"
+#   FUZZ_TARGETS     targets to run, default "stl template batch_job plate_job ply mesh gunzip profile"
 #   FUZZ_CORPUS_DIR  keep the corpora in FUZZ_CORPUS_DIR/<target> (seeded when empty) so that the next run
 #                    resumes from them; default: a temporary folder, removed after a clean run
 #   FUZZ_KEEP=1      keep the temporary folder (corpora, logs) after a clean run too
@@ -20,7 +20,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 repo=$(pwd)
 seconds=${1:-60}
-targets=${FUZZ_TARGETS:-stl template batch_job plate_job ply mesh gunzip}
+targets=${FUZZ_TARGETS:-stl template batch_job plate_job ply mesh gunzip profile}
 build_dir=${FUZZ_BUILD_DIR:-build-fuzz}
 models=${TOPOSLICE_MODELS_DIR:-$repo/../shared/models}
 if ! [[ "$seconds" =~ ^[1-9][0-9]*$ ]]; then
@@ -58,7 +58,7 @@ cmake -S . -B "$build_dir" -G Ninja -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_T
   -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g" -DCMAKE_CXX_FLAGS="-Wno-unknown-warning-option" \
   -DTOPOSLICE_BUILD_FUZZERS=ON -DTOPOSLICE_SANITIZE=address,undefined \
   -DTOPOSLICE_BUILD_TESTS=OFF -DTOPOSLICE_BUILD_BENCH=OFF >/dev/null
-cmake --build "$build_dir" --parallel "$(nproc)" --target fuzz_stl fuzz_template fuzz_batch_job fuzz_plate_job fuzz_ply fuzz_mesh fuzz_gunzip
+cmake --build "$build_dir" --parallel "$(nproc)" --target fuzz_stl fuzz_template fuzz_batch_job fuzz_plate_job fuzz_ply fuzz_mesh fuzz_gunzip fuzz_profile
 
 # --- Corpora ---------------------------------------------------------------------------------------------
 work=$(mktemp -d "${TMPDIR:-/tmp}/toposlice-fuzz.XXXXXX")
@@ -95,6 +95,7 @@ seed_target() {
     batch_job) cp fuzz/seeds/batch_job/*.json "$dir"/ ;;
     plate_job) cp fuzz/seeds/plate_job/*.json "$dir"/ ;;
     ply) cp fuzz/seeds/ply/* "$dir"/ ;;
+    profile) cp fuzz/seeds/profile/*.json "$dir"/ ;;
     mesh)
       cp fuzz/seeds/mesh/* "$dir"/
       chmod u+w "$dir"/*
@@ -126,7 +127,8 @@ for target in $targets; do
     ply) max_len=16384 dict=fuzz/seeds/ply.dict ;;
     mesh) max_len=16384 dict=fuzz/seeds/mesh.dict ;;
     gunzip) max_len=16384 dict="" ;;
-    *) echo "fuzz: unknown target '$target' (stl, template, batch_job, plate_job, ply, mesh, gunzip)" >&2; exit 2 ;;
+    profile) max_len=8192 dict=fuzz/seeds/profile.dict ;;
+    *) echo "fuzz: unknown target '$target' (stl, template, batch_job, plate_job, ply, mesh, gunzip, profile)" >&2; exit 2 ;;
   esac
   corpus=$corpus_root/$target
   mkdir -p "$corpus" "$work/artifacts/$target"
