@@ -926,6 +926,17 @@ TEST_F(CliToolMasks, Sl1ArchiveAndReportOfTheExamplePart) {
                              segmentMm2 * 2.0 * pi * 4.0 + 4.0 / 3.0 * pi * 1.5 * 1.5 * 1.5;
   EXPECT_NEAR(ml, analyticMm3 / 1000.0, 0.02 * analyticMm3 / 1000.0) << ml;
   expectNoTemporaries();
+
+  // The printer's build height reaches prusaslicer.ini (it said 150 whatever the printer's was); none
+  // (0) gives PrusaSlicer's 150.
+  EXPECT_EQ(sl1PrusaSlicerIni(path("out.sl1"))["max_print_height"], "150");  // the sl1 preset's
+  for (const auto& [given, written] :
+       {std::pair{"200", "200"}, std::pair{"40", "40"}, std::pair{"0", "150"}}) {
+    const RunResult h = run({"slice", examplePart().string(), "--masks", "h.sl1", "--printer", "sl1", "-H",
+                             "0.5", "--max-print-height", given, "--force", "-q"});
+    ASSERT_EQ(h.code(), 0) << h.describe();
+    EXPECT_EQ(sl1PrusaSlicerIni(path("h.sl1"))["max_print_height"], written) << given;
+  }
 }
 
 TEST_F(CliToolMasks, ModelThatDoesNotFitNeedsCrop) {

@@ -192,7 +192,13 @@ std::string sl1PrusaSlicerIni(const MaskJob& job, uint32_t layers) {
   const uint32_t pixelsX = portrait ? job.grid.height : job.grid.width,
                  pixelsY = portrait ? job.grid.width : job.grid.height;
   const double width = nanometres(pixelsX * job.grid.pixel), height = nanometres(pixelsY * job.grid.pixel);
-  const double printHeight = std::max(150.0, std::ceil(layers * job.layerHeight));
+  // The printer's max_print_height when it has one (the job refused a taller model), else 150 mm as
+  // PrusaSlicer's SL1 profile says; never below the stack, which PrusaSlicer would refuse.
+  double printerHeight = 0;
+  for (const auto& [key, value] : job.settings)
+    if (key == "max_print_height") printerHeight = std::strtod(value.c_str(), nullptr);
+  const double printHeight =
+      std::max(printerHeight > 0 ? printerHeight : 150.0, std::ceil(layers * job.layerHeight));
   IniMap m;
   m["absolute_correction"] = "0";
   m["area_fill"] = "50";
