@@ -595,6 +595,26 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
   EXPECT_FALSE(fs::exists(path("p.png")));
 }
 
+// Printer files carry one layer height: uneven planes came out as a part of another height (0.5, 1, 3,
+// 6 printed as 0.5, 1, 1.5, 2), silently. Refused there; the image stacks keep each plane.
+TEST_F(OptionChecks, UnevenPlanesAreRefusedForPrinterFiles) {
+  for (const char* masks : {"u.sl1", "u.goo", "u.nanodlp"}) {
+    const RunResult r = run(
+        {"slice", examplePart().string(), "--z", "0.5,1,3,6", "--printer", "sl1", "--masks", masks, "-q"});
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, "--z: the planes are not evenly spaced")) << r.err;
+    EXPECT_FALSE(fs::exists(path(masks)));
+  }
+  EXPECT_EQ(run({"slice", examplePart().string(), "--z", "0.5,1,1.5,2", "--printer", "sl1", "--masks",
+                 "e.goo", "-q"})
+                .code(),
+            0);
+  EXPECT_EQ(
+      run({"slice", examplePart().string(), "--z", "0.5,1,3,6", "--printer", "sl1", "--masks", "e.exr", "-q"})
+          .code(),
+      0);
+}
+
 TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
   const std::vector<std::vector<std::string>> cases{
       {"-o", "a.cli", "--svg-layers", "1"},
