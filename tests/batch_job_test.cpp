@@ -313,6 +313,7 @@ TEST(BatchJob, RejectsBadValues) {
               "at least one plane");
   expectError([](Json& j) { j["settings"] = Json::parse(R"({"z": [0.5, 1, 3], "printer": "sl1"})"); },
               "settings.z", "not evenly spaced");
+  expectError([](Json& j) { j["settings"]["method"] = "cp"; }, "settings.method", "uses no adjacency table");
   expectError([](Json& j) { j["variants"][0]["name"] = ""; }, "variants[0].name", "must not be empty");
   expectError([](Json& j) { j["variants"][0]["model"] = ""; }, "variants[0].model", "must not be empty");
   expectError([](Json& j) { j["variants"][0]["contours"] = "out/v1.txt"; }, "variants[0].contours",

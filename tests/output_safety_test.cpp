@@ -597,6 +597,22 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
 
 // Printer files carry one layer height: uneven planes came out as a part of another height (0.5, 1, 3,
 // 6 printed as 0.5, 1, 1.5, 2), silently. Refused there; the image stacks keep each plane.
+// --method cp builds and reads no adjacency: a --template was read and never checked against the model,
+// so a variant of other connectivity went through silently.
+TEST_F(OptionChecks, TemplateWithTheClosestPointMethodIsAnError) {
+  ASSERT_EQ(run({"template", examplePart().string(), "-o", "t.topo", "-q"}).code(), 0);
+  const RunResult r =
+      run({"slice", examplePart().string(), "--template", "t.topo", "--method", "cp", "-o", "c.cli", "-q"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "--template")) << r.err;
+  EXPECT_TRUE(contains(r.err, "--method cp")) << r.err;
+  EXPECT_FALSE(fs::exists(path("c.cli")));
+  EXPECT_EQ(run({"slice", examplePart().string(), "--template", "t.topo", "--method", "sr-lazy", "-o",
+                 "c.cli", "-q"})
+                .code(),
+            0);
+}
+
 TEST_F(OptionChecks, UnevenPlanesAreRefusedForPrinterFiles) {
   for (const char* masks : {"u.sl1", "u.goo", "u.nanodlp"}) {
     const RunResult r = run(

@@ -510,6 +510,18 @@ TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
           << e.what();
     }
   }
+  // A part's template with the closest-point method, which uses no adjacency table.
+  const std::string withTemplate = "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) +
+                                   ", \"template\": " + q(dir_ / "t.topo") + ", \"placement\": \"auto\"}";
+  try {
+    runPlateJob(job("{\"printer\": \"sl1\", \"parts\": [" + withTemplate +
+                    "], \"settings\": {\"method\": \"cp\"}, \"outputs\": {\"masks\": \"m.sl1\"}}"),
+                nullptr);
+    ADD_FAILURE() << "a template with method cp was accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("settings.method: cp uses no adjacency table"), std::string::npos)
+        << e.what();
+  }
 }
 
 TEST_F(PlateTest, ExistingOutputsAreRefusedBeforeTheSlicing) {

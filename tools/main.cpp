@@ -624,6 +624,10 @@ int run(int argc, char** argv) {
     options.masks.vdbSlabs = vdbLayout == "slabs";
     needs(slice->count("--on-mismatch") > 0, !templatePath.empty(), "--on-mismatch",
           "a template (--template)");
+    // The closest-point method uses no adjacency: a template's table would be read and never checked
+    // against the model (a variant of other connectivity went through without a word).
+    needs(!templatePath.empty(), method != "cp", "--template",
+          "--method sr or sr-lazy (--method cp uses no adjacency table)");
     needs(slice->count("--join-tolerance") > 0, method != "sr", "--join-tolerance",
           "--method cp or sr-lazy (the default sr joins segments through the adjacency table)");
     options.read = meshReadOptions(common);

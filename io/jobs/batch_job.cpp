@@ -156,6 +156,11 @@ class JobParser : public JsonReader {
     needs("cli_binary", anyCli, "a variant with .cli contours");
     needs("join_tolerance", !job_.method.empty() && job_.method != "sr",
           "method cp or sr-lazy (the default sr joins segments through the adjacency table)");
+    // The template's table is the point of a batch job; cp would neither use it nor check the variants.
+    if (job_.method == "cp")
+      fail(childPath("settings", "method"),
+           "cp uses no adjacency table, so the job's template would neither serve nor check the variants "
+           "(use sr or sr-lazy)");
     for (const auto& [k, value] : job_.printSettings)
       if (const std::string why = settingUnusedReason(k, masks, "a variant with masks"); !why.empty())
         fail(childPath(childPath("settings", "print_settings"), k), "does nothing in this job: " + why);

@@ -65,6 +65,10 @@ class PlateParser : public JsonReader {
     needs("settings", "mirror", !masks.empty(), "outputs.masks");
     needs("settings", "cli_binary", anyCli, "a .cli contour output");
     needs("settings", "allow_rebuild", anyTemplate, "a part with a template");
+    if (anyTemplate && job_.method == "cp")
+      fail(childPath("settings", "method"),
+           "cp uses no adjacency table, so the parts' templates would do nothing (use sr or sr-lazy, or "
+           "drop the templates)");
     needs("arrange", "rotation_step", anyAuto, "a part placed \"auto\"");
     for (const auto& [k, value] : job_.printSettings)
       if (const std::string why = settingUnusedReason(k, masks, "outputs.masks"); !why.empty())
