@@ -433,7 +433,18 @@ TEST(MeshReader, ObjErrorsNameTheFaceOrVertex) {
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2 -9\n"), "a.obj"); }),
             "a.obj: face 6: vertex index -9 out of range (8 vertices before it)");
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2 x\n"), "a.obj"); }),
+            "a.obj: face 6 (line 24): corner 2: vertex index 'x' is not a whole number");
+  EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2 0\n"), "a.obj"); }),
             "a.obj: face 6: corner 2 has vertex index 0 or no number");
+  // Indices an int does not hold wrapped to a real vertex (4294967297 to 1) and were accepted.
+  for (const char* index : {"4294967297", "-4294967295", "2147483648", "99999999999999999999"})
+    EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2/7 " + index + "/1\n"), "a.obj"); }),
+              "a.obj: face 6 (line 24): corner 2: vertex index '" + std::string(index) + "' is out of range");
+  // A missing coordinate was read as 0 (the mesh flattened, silently).
+  EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("v 0 0 0\nv 1 0 0\nv 0 0 # z?\nf 1 2 3\n"), "a.obj"); }),
+            "a.obj: vertex 3 (line 3): expected 3 coordinates, found 2");
+  EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("v 0 0 0\nv 1 0 0\nv\nv 0 1 0\nf 1 2 3\n"), "a.obj"); }),
+            "a.obj: vertex 3 (line 3): expected 3 coordinates, found 0");
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("v 0 0 0\nv 1 0 0\nv 0 1e99 0\nf 1 2 3\n"), "a.obj"); }),
             "a.obj: vertex 3: non-finite coordinate (NaN, infinity or beyond float's range)");
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf("v 0 0 0\n  v 1 nan 0\nv 0 1 0\nf 1 2 3\n"), "a.obj"); }),

@@ -49,23 +49,52 @@ struct ObjState {
 };
 
 // tinyobjloader reads a coordinate it cannot parse ("nan", "inf", "abc", "1,5") as 0 or a prefix without a
-// word, so the values of every v line are checked here first: each of the first three present must be a
-// finite number as std::from_chars reads it (with an optional leading '+').
+// word, and a missing one as 0; it reads vertex indices into an int that wraps (4294967297 became 1). So
+// every v and f line is checked here first: a v line holds at least three coordinates, each a finite
+// number as std::from_chars reads it (with an optional leading '+'); each corner of an f line starts with
+// a whole vertex index an int holds.
 void checkVertexLines(std::string_view text, const std::string& name) {
   const auto blank = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
-  uint64_t vertex = 0, line = 0;
+  uint64_t vertex = 0, face = 0, line = 0;
   for (std::size_t pos = 0; pos < text.size();) {
     const std::size_t lf = std::min(text.find('\n', pos), text.size());
     std::string_view rest = text.substr(pos, lf - pos);
     pos = lf + 1;
     ++line;
     while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
-    if (rest.size() < 2 || rest[0] != 'v' || !blank(rest[1])) continue;
+    if (rest.size() >= 2 && rest[0] == 'f' && blank(rest[1])) {
+      ++face;
+      rest.remove_prefix(2);
+      for (int k = 0;; ++k) {
+        while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
+        if (rest.empty() || rest.front() == '#') break;
+        std::size_t end = 0;
+        while (end < rest.size() && !blank(rest[end])) ++end;
+        const std::string_view corner = rest.substr(0, end);
+        rest.remove_prefix(end);
+        const std::string_view token = corner.substr(0, corner.find('/'));
+        const char* begin = token.data() + (token.size() > 1 && token[0] == '+' && token[1] != '-');
+        int64_t index = 0;
+        const auto [ptr, ec] = std::from_chars(begin, token.data() + token.size(), index);
+        if (ec == std::errc() && ptr == token.data() + token.size() &&
+            index >= std::numeric_limits<int>::min() + 1 && index <= std::numeric_limits<int>::max())
+          continue;
+        throwInputError(
+            name, "face " + std::to_string(face - 1) + " (line " + std::to_string(line) + "): corner " +
+                      std::to_string(k) + ": vertex index " + quoteToken(token) +
+                      (ec == std::errc() || ec == std::errc::result_out_of_range ? " is out of range"
+                                                                                 : " is not a whole number"));
+      }
+      continue;
+    }
+    if (rest.empty() || rest[0] != 'v' || (rest.size() > 1 && !blank(rest[1]))) continue;  // vn, vt, ...
     ++vertex;
-    rest.remove_prefix(2);
+    rest.remove_prefix(std::min<std::size_t>(2, rest.size()));
     for (int k = 0; k < 3; ++k) {
       while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
-      if (rest.empty()) break;
+      if (rest.empty() || rest.front() == '#')
+        throwInputError(name, "vertex " + std::to_string(vertex) + " (line " + std::to_string(line) +
+                                  "): expected 3 coordinates, found " + std::to_string(k));
       std::size_t end = 0;
       while (end < rest.size() && !blank(rest[end])) ++end;
       const std::string_view token = rest.substr(0, end);
