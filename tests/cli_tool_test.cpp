@@ -1230,6 +1230,27 @@ TEST_F(CliToolInterrupt, SecondSigintDuringPngFolderOutputLeavesNothing) {
   EXPECT_TRUE(contains(r.err, "interrupted")) << r.describe();
 }
 
+// A read can block (a pipe that no one writes) or take long (a 3MF whose components place a mesh 10^10
+// times, inside lib3mf): the first signal was only a request the job would look at after the read, so a
+// single Ctrl-C did nothing. While a single-model command reads, the first signal stops it at once.
+TEST_F(CliToolInterrupt, FirstSignalWhileReadingStopsAtOnce) {
+  ASSERT_EQ(::mkfifo(path("pipe.stl").c_str(), 0600), 0) << std::strerror(errno);
+  for (const int signal : {SIGINT, SIGTERM}) {
+    const auto begin = std::chrono::steady_clock::now();
+    const pid_t pid =
+        start({"slice", "pipe.stl", "-H", "0.5", "-o", "p.cli", "--masks", "p.sl1", "--printer", "sl1"});
+    ASSERT_GT(pid, 0);
+    std::this_thread::sleep_for(300ms);  // blocked opening the pipe
+    ASSERT_EQ(::kill(pid, signal), 0) << std::strerror(errno);
+    const RunResult r = finish(pid, 10s);
+    EXPECT_TRUE(r.signalled(signal)) << r.describe();
+    EXPECT_LT(std::chrono::steady_clock::now() - begin, 8s);
+    EXPECT_TRUE(contains(r.err, "interrupted while reading: stopped at once")) << r.describe();
+    EXPECT_FALSE(fs::exists(path("p.cli")) || fs::exists(path("p.sl1")));
+    expectNoTemporaries();
+  }
+}
+
 TEST_F(CliToolInterrupt, SigintDuringBinaryCliOutputLeavesNothing) {
   RunResult r;
   interruptAndCheck(*this,

@@ -46,10 +46,14 @@ const char* gInterruptedMessage = "interrupted; no output was left behind";
 // (files and staged folders) is removed by its owner, and run() then dies by the same signal. A second
 // signal stops at once, removing the temporary files it can from the handler.
 extern "C" void onSignal(int signal) {
-  if (gSignal != 0) {
+  const bool again = gSignal != 0;
+  if (again || (stopAtOnceWhileReading().load() && readsInProgress().load() > 0)) {
     removePendingOutputs();
-    static const char kMessage[] = "toposlice: interrupted again: stopped at once; its temporaries removed\n";
-    [[maybe_unused]] const ssize_t written = ::write(STDERR_FILENO, kMessage, sizeof kMessage - 1);
+    static const char kAgain[] = "toposlice: interrupted again: stopped at once; its temporaries removed\n";
+    static const char kReading[] =
+        "toposlice: interrupted while reading: stopped at once; no output was left behind\n";
+    [[maybe_unused]] const ssize_t written = again ? ::write(STDERR_FILENO, kAgain, sizeof kAgain - 1)
+                                                   : ::write(STDERR_FILENO, kReading, sizeof kReading - 1);
     std::signal(signal, SIG_DFL);
     std::raise(signal);
     return;
@@ -139,9 +143,15 @@ void printBox(const BoundingBox& b) {
               double{b.max.y} - b.min.y, double{b.max.z} - b.min.z);
 }
 
+// readMesh counted as a read in progress (a stop signal may end the process at once meanwhile).
+FacetSoup readModel(const std::string& model, const MeshReadOptions& read, MeshSource* source = nullptr) {
+  ReadScope reading;
+  return readMesh(model, read, source);
+}
+
 int runInfo(const std::string& model, const MeshReadOptions& read) {
   MeshSource source;
-  const FacetSoup soup = readMesh(model, read, &source);
+  const FacetSoup soup = readModel(model, read, &source);
   const ChunkRunner runner = parallelChunkRunner();
   const IndexedMesh mesh = weldCorners(soup.corners, runner);
   std::vector<int32_t> table(soup.corners.size());
@@ -350,7 +360,7 @@ int runTemplate(const std::string& model, const MeshReadOptions& read, const std
   // The table is written in a transaction that commits only when no stop signal has come: an
   // interrupted run leaves no table, a finished one a complete table.
   OutputTransaction transaction;
-  const FacetSoup soup = readMesh(model, read);
+  const FacetSoup soup = readModel(model, read);
   const ChunkRunner runner = parallelChunkRunner();
   const TemplateTable table = buildTemplateTable(weldCorners(soup.corners, runner), runner);
   writeTemplateFile(output, table, force);
@@ -380,7 +390,7 @@ int runPreview(const std::string& model, const MeshReadOptions& read, const std:
     throw InputError(output + ": the picture is a PNG: give a .png file name");
   checkOutputAllowed(output, force);  // before the model is read, not after the work
   OutputTransaction transaction;
-  const FacetSoup soup = readMesh(model, read);
+  const FacetSoup soup = readModel(model, read);
   const std::vector<uint8_t> png = previewPng(soup.corners, width, height, parallelChunkRunner());
   OutputFile file(output, force);
   file.write(png.data(), png.size());
@@ -589,6 +599,9 @@ int run(int argc, char** argv) {
   std::signal(SIGXFSZ, SIG_IGN);
   auto runCommand = [&]() -> int {
     if (*plate || *batch) setOverwriteHint("set \"overwrite\": true in the job's settings to replace it");
+    // One model, nothing committed while it is read: a stop signal then ends these at once (a batch or a
+    // plate may be committing another variant's or plate's outputs meanwhile).
+    stopAtOnceWhileReading().store(*info || *preview || *templ || *slice);
     if (*info) return runInfo(model, meshReadOptions(common));
     if (*preview)
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);

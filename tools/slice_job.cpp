@@ -356,6 +356,16 @@ std::atomic<bool>& interruptRequested() {
   return requested;
 }
 
+std::atomic<int>& readsInProgress() {
+  static std::atomic<int> reads{0};
+  return reads;
+}
+
+std::atomic<bool>& stopAtOnceWhileReading() {
+  static std::atomic<bool> allowed{false};
+  return allowed;
+}
+
 double peakResidentMiB() {
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
@@ -612,6 +622,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (options.slice.method == SliceMethod::SelfReuse && templateTable == nullptr && !readTemplate &&
       !options.print.scales())
     modelRead.weld = &welded;
+  std::optional<ReadScope> reading(std::in_place);
   parallelForChunks(reads, 1, [&](std::size_t i0, std::size_t i1) {
     for (std::size_t i = i0; i < i1; ++i) try {
         if (i == 0)
@@ -624,6 +635,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
         readErrors[i] = std::current_exception();
       }
   });
+  reading.reset();
   for (const std::exception_ptr& error : readErrors)
     if (error) std::rethrow_exception(error);
   if (readTemplate) templateTable = &loadedTemplate;

@@ -105,6 +105,21 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
 // next band; the job then throws, and unwinding removes every temporary output.
 std::atomic<bool>& interruptRequested();
 
+// Reads of input files in progress (a model, a feature, a template table): while some run and the
+// command allows it (stopAtOnceWhileReading), a first stop signal ends the process at once, as a second
+// one does, since a read may block (a pipe) or take long (a 3MF whose components place a mesh 10^10
+// times) and nothing is committed meanwhile. Commands that commit while they read (batch, plate) leave it
+// off. Both are lock-free atomics, read by the signal handler.
+std::atomic<int>& readsInProgress();
+std::atomic<bool>& stopAtOnceWhileReading();
+class ReadScope {
+ public:
+  ReadScope() { readsInProgress().fetch_add(1); }
+  ~ReadScope() { readsInProgress().fetch_sub(1); }
+  ReadScope(const ReadScope&) = delete;
+  ReadScope& operator=(const ReadScope&) = delete;
+};
+
 // Peak resident memory of this process so far, in MiB.
 double peakResidentMiB();
 

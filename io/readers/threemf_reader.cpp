@@ -2,8 +2,10 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <limits>
+#include <map>
 #include <vector>
 
 #include "Model/COM/NMR_DLLInterfaces.h"
@@ -14,6 +16,11 @@ namespace toposlice {
 namespace {
 
 constexpr int kMaxComponentDepth = 32;
+// What a model may expand to through its components (each placing an object again): the facets must fit
+// the adjacency's int32 indices, and the placements themselves are bounded too (a few kilobytes of nested
+// components can place a mesh 10^10 times, which ran for hours).
+constexpr uint64_t kMaxFacets = 0x7fffffffu;
+constexpr uint64_t kMaxPlacements = 100'000'000;
 
 // Row-major 3x4 affine map, x' = m[0][0] x + m[0][1] y + m[0][2] z + m[0][3] (lib3mf's MODELTRANSFORM
 // layout).
@@ -83,6 +90,16 @@ class Reader {
                                            NMR::lib3mf_builditem_getobjecttransform, "build item transform");
       if (first) source_.objectName = objectName(object.get());
       first = false;
+      // The whole expansion is counted before any of it is placed (every object once: memoized).
+      const Expansion e = expansionOf(object.get(), 0);
+      facets_ = saturatingAdd(facets_, e.facets);
+      placements_ = saturatingAdd(placements_, e.placements);
+      if (facets_ > kMaxFacets || placements_ > kMaxPlacements)
+        throwInputError(name_, "its build items expand through their components to " +
+                                   (facets_ > kMaxFacets
+                                        ? "more than " + std::to_string(kMaxFacets) + " facets"
+                                        : "more than " + std::to_string(kMaxPlacements) + " placed objects") +
+                                   ", more than toposlice slices");
       addObject(object.get(), placement, 0);
       check(NMR::lib3mf_builditemiterator_movenext(items.get(), &more), items.get(), "build items");
     }
@@ -90,6 +107,49 @@ class Reader {
   }
 
  private:
+  struct Expansion {
+    uint64_t facets = 0, placements = 0;
+  };
+  static uint64_t saturatingAdd(uint64_t a, uint64_t b) { return a > UINT64_MAX - b ? UINT64_MAX : a + b; }
+
+  // The facets and object placements that `object` expands to (supports skipped, as addObject does).
+  Expansion expansionOf(NMR::PLib3MFBase* object, int depth) {
+    if (depth > kMaxComponentDepth) {
+      throwInputError(name_,
+                      "components nested more than " + std::to_string(kMaxComponentDepth) + " levels deep");
+    }
+    DWORD id = 0;
+    check(NMR::lib3mf_resource_getresourceid(object, &id), object, "object id");
+    if (const auto it = expansions_.find(id); it != expansions_.end()) return it->second;
+    Expansion e{0, 1};
+    DWORD type = 0;
+    check(NMR::lib3mf_object_gettype(object, &type), object, "object type");
+    BOOL isMesh = false, isComponents = false;
+    check(NMR::lib3mf_object_ismeshobject(object, &isMesh), object, "object");
+    check(NMR::lib3mf_object_iscomponentsobject(object, &isComponents), object, "object");
+    if (type == NMR::MODELOBJECTTYPE_SUPPORT || type == NMR::MODELOBJECTTYPE_SOLIDSUPPORT) {
+      e.placements = 0;
+    } else if (isMesh) {
+      DWORD triangles = 0;
+      check(NMR::lib3mf_meshobject_gettrianglecount(object, &triangles), object, "mesh");
+      e.facets = triangles;
+    } else if (isComponents) {
+      DWORD count = 0;
+      check(NMR::lib3mf_componentsobject_getcomponentcount(object, &count), object, "components");
+      for (DWORD i = 0; i < count; ++i) {
+        Lib3mfHandle component, child;
+        check(NMR::lib3mf_componentsobject_getcomponent(object, i, component.out()), object, "component");
+        check(NMR::lib3mf_component_getobjectresource(component.get(), child.out()), component.get(),
+              "component object");
+        const Expansion c = expansionOf(child.get(), depth + 1);
+        e.facets = saturatingAdd(e.facets, c.facets);
+        e.placements = saturatingAdd(e.placements, c.placements);
+      }
+    }
+    expansions_[id] = e;
+    return e;
+  }
+
   // The transform of a build item or component (`has` and `get` are lib3mf's functions for it), identity
   // when it states none.
   Affine transformOf(NMR::PLib3MFBase* owner, LIB3MFRESULT (*has)(NMR::PLib3MFBase*, BOOL*),
@@ -217,6 +277,8 @@ class Reader {
   std::vector<NMR::MODELMESHVERTEX> vertices_;     // scratch, per mesh
   std::vector<NMR::MODELMESHTRIANGLE> triangles_;  // scratch, per mesh
   std::vector<Point3f> placed_;                    // scratch, per mesh
+  std::map<DWORD, Expansion> expansions_;          // by object resource id
+  uint64_t facets_ = 0, placements_ = 0;           // of the build items so far, expanded
 };
 
 }  // namespace
