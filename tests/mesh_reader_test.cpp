@@ -542,6 +542,50 @@ TEST(MeshReader, ThreeMfSkipsSupportsAndResolvesMirroredComponents) {
   EXPECT_FLOAT_EQ(b.max.x, 1);
 }
 
+// Components place an object again and again: a few kilobytes can expand to more facets than the
+// adjacency's int32 indices hold (or than memory does). The reader counts the expansion, each object
+// once, before placing anything: a 1,000-facet mesh placed 1,000 times by an object that is placed 3,000
+// times (3e9 facets) is refused.
+TEST(MeshReader, ThreeMfComponentsExpandingPastTheFacetLimitAreRefused) {
+  fixtures::ScratchDir dir;
+  Lib3mfHandle model, mesh, assembly, outer, item, writer;
+  ASSERT_EQ(NMR::lib3mf_createmodel(model.out()), LIB3MF_OK);
+  ASSERT_EQ(NMR::lib3mf_model_addmeshobject(model.get(), mesh.out()), LIB3MF_OK);
+  constexpr DWORD kTriangles = 1000;
+  std::vector<NMR::MODELMESHVERTEX> vertices(kTriangles + 2);
+  for (DWORD v = 0; v < kTriangles + 2; ++v) {
+    vertices[v].m_fPosition[0] = static_cast<float>(v / 2);
+    vertices[v].m_fPosition[1] = static_cast<float>(v % 2);
+    vertices[v].m_fPosition[2] = 0;
+  }
+  std::vector<NMR::MODELMESHTRIANGLE> triangles(kTriangles);  // a strip
+  for (DWORD t = 0; t < kTriangles; ++t) triangles[t] = {{t, t + 1, t + 2}};
+  ASSERT_EQ(NMR::lib3mf_meshobject_setgeometry(mesh.get(), vertices.data(), kTriangles + 2, triangles.data(),
+                                               kTriangles),
+            LIB3MF_OK);
+  ASSERT_EQ(NMR::lib3mf_model_addcomponentsobject(model.get(), assembly.out()), LIB3MF_OK);
+  ASSERT_EQ(NMR::lib3mf_model_addcomponentsobject(model.get(), outer.out()), LIB3MF_OK);
+  for (int i = 0; i < 3000; ++i) {
+    Lib3mfHandle component;
+    NMR::MODELTRANSFORM at = translation(0, 0, static_cast<float>(i));
+    if (i < 1000) {
+      ASSERT_EQ(NMR::lib3mf_componentsobject_addcomponent(assembly.get(), mesh.get(), &at, component.out()),
+                LIB3MF_OK);
+    }
+    Lib3mfHandle placed;
+    ASSERT_EQ(NMR::lib3mf_componentsobject_addcomponent(outer.get(), assembly.get(), &at, placed.out()),
+              LIB3MF_OK);
+  }
+  ASSERT_EQ(NMR::lib3mf_model_addbuilditem(model.get(), outer.get(), nullptr, item.out()), LIB3MF_OK);
+  ASSERT_EQ(NMR::lib3mf_model_querywriter(model.get(), "3mf", writer.out()), LIB3MF_OK);
+  ASSERT_EQ(NMR::lib3mf_writer_writetofileutf8(writer.get(), (dir / "many.3mf").c_str()), LIB3MF_OK);
+  const std::string name = (dir / "many.3mf").string();
+  EXPECT_EQ(errorOf([&] { readMesh(dir / "many.3mf"); }),
+            name +
+                ": its build items expand through their components to more than 2147483647 facets, more "
+                "than toposlice slices");
+}
+
 TEST(MeshReader, ThreeMfDamagedPackage) {
   fixtures::ScratchDir dir;
   writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
