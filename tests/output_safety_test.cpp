@@ -314,6 +314,21 @@ TEST_F(OutputSafety, ForceRefusesOtherProgramsFilesOfTheFormatsToposliceWrites) 
   expectNoTemporaries();
 }
 
+// Out of memory said "toposlice: error: std::bad_alloc", naming nothing: now the input, what ran out and
+// what makes a job smaller, in one line, and nothing is left behind.
+TEST_F(OutputSafety, OutOfMemoryNamesTheInputAndLeavesNothing) {
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "the sanitizers' shadow memory needs more address space than the limit";
+#endif
+  setMemoryLimit(rlim_t{1536} << 20);
+  const RunResult r = run({"slice", examplePart().string(), "-H", "2", "--masks", "m.sl1", "--pixel", "0.001",
+                           "--resolution", "100000x100000", "-o", "m.cli", "-q"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, examplePart().string() + ": out of memory")) << r.err;
+  EXPECT_FALSE(fs::exists(path("m.sl1")) || fs::exists(path("m.cli")));
+  expectNoTemporaries();
+}
+
 // A file-size limit (ulimit -f) does not kill the job with its temporaries in place: the write fails, the
 // job says so in one line and leaves nothing.
 TEST_F(OutputSafety, FileSizeLimitFailsTheJobCleanly) {

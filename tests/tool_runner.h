@@ -264,6 +264,11 @@ class CliToolBase : public testing::Test {
         ignore.sa_handler = ignoreXfsz_ ? SIG_IGN : SIG_DFL;
         ::sigaction(SIGXFSZ, &ignore, nullptr);
       }
+      if (memoryLimit_ > 0) {  // allocations past it fail (std::bad_alloc)
+        struct rlimit limit {};
+        limit.rlim_cur = limit.rlim_max = memoryLimit_;
+        ::setrlimit(RLIMIT_AS, &limit);
+      }
       sigset_t none;
       ::sigemptyset(&none);
       ::sigprocmask(SIG_SETMASK, &none, nullptr);
@@ -324,8 +329,12 @@ class CliToolBase : public testing::Test {
     ignoreXfsz_ = ignoreSignal;
   }
 
+  // A limit on the program's address space (RLIMIT_AS; 0: none): allocations past it fail. Not with the
+  // sanitizers, whose shadow memory needs terabytes of address space.
+  void setMemoryLimit(rlim_t bytes) { memoryLimit_ = bytes; }
+
   fs::path root_, dir_;
-  rlim_t fileSizeLimit_ = 0;
+  rlim_t fileSizeLimit_ = 0, memoryLimit_ = 0;
   bool ignoreXfsz_ = true;
   int runs_ = 0;
   std::string outPath_, errPath_;

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <new>
 #include <string>
 #include <thread>
 #include <vector>
@@ -716,6 +717,17 @@ int run(int argc, char** argv) {
     }
     endIfInterrupted();
     return status;
+  } catch (const std::bad_alloc&) {
+    // Not "std::bad_alloc": what ran out, for which input, and what makes a job smaller. Every temporary
+    // was removed as the job unwound.
+    endIfInterrupted();
+    const std::string input = *batch ? jobPath : *plate ? plateJobPath : model;
+    std::fprintf(stderr,
+                 "toposlice: error: %s: out of memory: the job needs more than the system gives this process "
+                 "(fewer --threads, a smaller image or --band-layers, or a smaller model); no output was "
+                 "left behind\n",
+                 input.c_str());
+    return 1;
   } catch (const std::exception& e) {
     endIfInterrupted();
     std::fprintf(stderr, "toposlice: error: %s\n", e.what());
