@@ -172,6 +172,26 @@ check "warnings: 2 ranks exit 0, got $rc_w" test "$rc_w" -eq 0
 check "warnings: one per variant on stderr with --quiet" test \
   "$(grep -c "^toposlice-mpi: warning: variant 'turned[123]': .*inv.stl: the mesh is inside out" "$tmp/W.err")" -eq 3
 
+# --quiet with a failing variant, as toposlice batch -q: no table, one error line naming the variant on
+# stderr; and no progress lines when stderr is not a terminal. --dispatch-only on one rank is an error.
+rm -rf "$tmp/C/out"
+timeout 300 mpirun --allow-run-as-root --oversubscribe --bind-to none -np 2 \
+  --mca btl self,tcp --mca btl_tcp_if_include lo --mca oob_tcp_if_include lo \
+  "$mpi" batch "$tmp/C/job.json" --quiet >"$tmp/Q.out" 2>"$tmp/Q.err"
+rc_q=$?
+check "quiet: exits 1 (tibia fails), got $rc_q" test "$rc_q" -eq 1
+check "quiet: nothing on stdout" test ! -s "$tmp/Q.out"
+check "quiet: one error line for tibia, no table" test \
+  "$(grep -c "^toposlice-mpi: error: variant 'tibia' (.*): .*connectivity" "$tmp/Q.err")" -eq 1 -a \
+  "$(grep -c "^summary" "$tmp/Q.err")" -eq 0
+check "not a terminal: no progress lines" test "$(grep -c '^toposlice-mpi: \[' "$tmp/B.log")" -eq 0
+timeout 60 mpirun --allow-run-as-root --oversubscribe --bind-to none -np 1 \
+  --mca btl self,tcp --mca btl_tcp_if_include lo --mca oob_tcp_if_include lo \
+  "$mpi" batch "$tmp/C/job.json" --dispatch-only >"$tmp/D.out" 2>&1
+rc_d=$?
+check "--dispatch-only on 1 rank: refused (exit 2), got $rc_d" test "$rc_d" -eq 2
+check "--dispatch-only on 1 rank: says why" grep -q "^toposlice-mpi: error: --dispatch-only .* no other rank" "$tmp/D.out"
+
 # A plate job: the four arches of examples/plate on a 70 x 40 mm plate, one arch per plate, with print
 # settings (scaling along the plate's x, absolute correction, elephant foot, exposure). The same job
 # file for every run (an SL1 archive is dated by its job file), outputs in P/out, moved aside after each.

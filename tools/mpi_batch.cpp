@@ -260,6 +260,12 @@ int runWorker(const Options& options) {
 
 int runDispatcher(const Options& options, int size, int provided) {
   const auto start = std::chrono::steady_clock::now();
+  if (options.dispatchOnly && size == 1) {  // an option that cannot apply: no other rank to slice
+    std::fprintf(stderr,
+                 "toposlice-mpi: error: --dispatch-only keeps rank 0 from slicing, and this job has no other "
+                 "rank: run it with mpirun -np N, N > 1\n");
+    return broadcastInt(2);
+  }
   BatchJob job;
   BatchTemplate tmpl;
   std::optional<ThreadLimit> jobThreads;
@@ -287,12 +293,13 @@ int runDispatcher(const Options& options, int size, int provided) {
   const std::size_t toSlice = pending.size();
   WorkQueue queue(largestFirst(job, std::move(pending)));
   std::size_t finished = 0;
+  const bool progressLines = !options.quiet && ::isatty(STDERR_FILENO) == 1;
   auto record = [&](std::size_t i, BatchOutcome o) {
     ++finished;
     for (const std::string& w : o.warnings)  // never hidden by --quiet, as in toposlice batch
       std::fprintf(stderr, "toposlice-mpi: warning: variant '%s': %s\n", job.variants[i].name.c_str(),
                    w.c_str());
-    if (!options.quiet)
+    if (progressLines)  // as toposlice batch's bar: on a terminal, not with --quiet
       std::fprintf(stderr, "toposlice-mpi: [%zu/%zu] %s %s in %.2f s on rank %d%s%s\n", finished, toSlice,
                    job.variants[i].name.c_str(), o.status.c_str(), o.seconds, o.rank,
                    o.status == "failed" ? ": " : "", o.status == "failed" ? o.detail.c_str() : "");
@@ -401,17 +408,21 @@ int runDispatcher(const Options& options, int size, int provided) {
 
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const BatchTotals totals = batchTotals(outcomes);
-  if (!options.quiet || totals.failed > 0) {
+  // As toposlice batch: the table on stdout unless --quiet, one error line per failed variant on stderr.
+  if (!options.quiet) {
     std::string suffix = "; " + std::to_string(size) + (size == 1 ? " rank" : " ranks") + " x " +
                          std::to_string(ThreadLimit::available()) + " threads";
     if (!setupErrors.empty()) {
       suffix += "; could not start:";
       for (const auto& e : setupErrors) suffix += " " + e;
     }
-    std::FILE* out = options.quiet ? stderr : stdout;
-    printBatchSummary(out, job, tmpl, outcomes, total, true, suffix);
-    std::fflush(out);
+    printBatchSummary(stdout, job, tmpl, outcomes, total, true, suffix);
+    std::fflush(stdout);
   }
+  for (std::size_t i = 0; i < n; ++i)
+    if (outcomes[i].status == "failed")
+      std::fprintf(stderr, "toposlice-mpi: error: variant '%s' (%s): %s\n", job.variants[i].name.c_str(),
+                   job.variants[i].model.c_str(), outcomes[i].detail.c_str());
   return broadcastInt(totals.failed > 0 ? 1 : 0);
 }
 
