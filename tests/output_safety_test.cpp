@@ -683,6 +683,11 @@ TEST_F(OptionChecks, ExplainRefusesWhatTheRunRefuses) {
   const std::vector<std::vector<std::string>> cases{
       {"--profile", "lab.json", "--printer", "lab", "--masks", "part.sl1", "--explain"},
       {"-o", "a.cli", "--printer", "sl1", "--explain"},
+      // The image's own checks, which the run made after reading the model and --explain not at all.
+      {"--printer", "sl1", "--masks", "o.goo", "--display-orientation", "portrait", "--explain"},
+      {"--masks", "o.sl1", "--explain"},
+      {"--printer", "sl1", "--display-width", "100", "--masks", "o.sl1", "--explain"},
+      {"--printer", "generic-4k", "--masks", "o.sl1", "--explain"},
   };
   for (const auto& args : cases) {
     std::vector<std::string> all{"slice", examplePart().string(), "-H", "0.5"};

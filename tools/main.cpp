@@ -234,8 +234,9 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
 // scaling correction scales, in words.
 void explainPrintSettings(const PrintSettings& p, const std::filesystem::path& masks, bool antialiasAsked,
                           const char* scaleCentre) {
-  std::printf("printer    : %s\n",
-              p.printerName.empty() ? "(none: --resolution and --pixel)" : p.printerName.c_str());
+  std::printf("printer    : %s\n", !p.printerName.empty() ? p.printerName.c_str()
+                                   : masks.empty()        ? "(none)"
+                                                   : "(none: the image from --resolution and --pixel)");
   std::printf("material   : %s\n", p.materialName.c_str());
   for (const auto& [key, value] : settingValues(p)) {
     const auto origin = p.origin.find(key);
@@ -298,6 +299,13 @@ bool parsePixelSize(const std::string& text, uint64_t max, uint32_t& width, uint
 // slice --explain: nothing is read or written.
 int explainSettings(const std::string& model, const SliceJobOptions& options) {
   validateSliceOptions(options);  // what the run would refuse, --explain refuses too
+  if (!options.masks.output.empty()) {
+    // The image's own checks (a size and a pixel pitch, square pixels, an orientation the format can
+    // carry), as the run makes them, without the model: its extent only places the image (cropped here).
+    MaskOptions masks = options.masks;
+    masks.crop = true;
+    makeMaskJob(masks, options.print, BoundingBox{}, model, {});
+  }
   std::printf("model      : %s\n", model.c_str());
   explainPrintSettings(options.print, options.masks.output, options.masks.antialias,
                        "the bounding-box centre in x and y and the lowest z");
