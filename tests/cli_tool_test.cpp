@@ -937,6 +937,14 @@ TEST_F(CliToolMasks, Sl1ArchiveAndReportOfTheExamplePart) {
     ASSERT_EQ(h.code(), 0) << h.describe();
     EXPECT_EQ(sl1PrusaSlicerIni(path("h.sl1"))["max_print_height"], written) << given;
   }
+  // Numbers in fixed notation, never the exponent form of the shortest text ("1e-05").
+  ASSERT_EQ(run({"slice", examplePart().string(), "--masks", "h.sl1", "--printer", "sl1", "-H", "0.5",
+                 "--exposure-time", "0.00001", "--absolute-correction", "0.0000001", "--force", "-q"})
+                .code(),
+            0);
+  auto ini = sl1PrusaSlicerIni(path("h.sl1"));
+  EXPECT_EQ(ini["exposure_time"], "0.00001");
+  EXPECT_EQ(ini["absolute_correction"], "0.0000001");
 }
 
 TEST_F(CliToolMasks, ModelThatDoesNotFitNeedsCrop) {

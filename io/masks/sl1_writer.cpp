@@ -37,6 +37,15 @@ std::string number(uint64_t v) {
   return std::to_string(v);
 }
 
+// A setting's text with a number in exponent form ("1e-05", the shortest form that reads back) written in
+// fixed notation, as every number of the .ini files is; other text as it is.
+std::string fixedNotation(const std::string& value) {
+  if (value.find_first_of("eE") == std::string::npos) return value;
+  double v = 0;
+  const auto [end, ec] = std::from_chars(value.data(), value.data() + value.size(), v);
+  return ec == std::errc() && end == value.data() + value.size() ? number(v) : value;
+}
+
 std::string toIni(const IniMap& m) {
   std::string text;
   for (const auto& [key, value] : m) text += key + " = " + value + "\n";
@@ -236,7 +245,7 @@ std::string sl1PrusaSlicerIni(const MaskJob& job, uint32_t layers) {
     if (!key.starts_with("display_") && key != "printer_model" && key != "max_print_height" &&
         key != "light_map" && key != "elefant_foot_layers" && key.find("lift") == std::string::npos &&
         key != "retract_speed" && key != "wait_before_exposure" && key != "light_pwm" && !value.empty())
-      m[key] = value;
+      m[key] = fixedNotation(value);
   if (!job.printerProfile.empty()) m["printer_settings_id"] = job.printerProfile;
   if (!job.materialName.empty()) m["sla_material_settings_id"] = job.materialName;
   return toIni(m);
