@@ -1005,6 +1005,32 @@ TEST_F(CorrectionsCli, ControlCharactersInSettingsAndNamesAreRefused) {
   refused({"--profile", path("p.json").string()}, "p.json: printers: the name 'lab\\nexpTime = 77'");
 }
 
+// A profile is as strict as a job file: a repeated key was kept silently (the last one), and true was
+// taken as the number 1 (exposure_time: true gave 1 s); true/false are for flags.
+TEST_F(CorrectionsCli, ProfilesRefuseRepeatedKeysAndTrueForANumber) {
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {R"({"printers": {"p": {"inherits": "sl1", "light_pwm": 1}, "p": {"light_pwm": 7}}})",
+       "p.json: printers.p: duplicate key"},
+      {R"({"printers": {"p": {"inherits": "sl1", "light_pwm": 1, "light_pwm": 7}}})",
+       "p.json: printers.p.light_pwm: duplicate key"},
+      {R"({"printers": {"p": {"inherits": "sl1"}}, "materials": {"m": {"exposure_time": true}}})",
+       "exposure_time 'true': expected a number"},
+  };
+  for (const auto& [profile, message] : cases) {
+    tool_test::writeBytes(path("p.json"), profile);
+    const RunResult r = this->run({"slice", examplePart().string(), "--profile", path("p.json").string(),
+                                   "--masks", path("m.sl1").string(), "-q"});
+    expectOneErrorLine(r);
+    EXPECT_NE(r.err.find(message), std::string::npos) << r.err;
+  }
+  tool_test::writeBytes(path("p.json"),
+                        R"({"printers": {"p": {"inherits": "sl1", "display_mirror_x": false}}})");
+  EXPECT_EQ(this->run({"slice", examplePart().string(), "--profile", path("p.json").string(), "--masks",
+                       path("m.sl1").string(), "-q"})
+                .code(),
+            0);
+}
+
 // A batch job's unknown printer or material is refused before its template table is built and saved
 // (every variant failed on it afterwards, the table left behind), naming the job file and the key; a
 // plate job's likewise.

@@ -36,7 +36,7 @@ std::vector<std::pair<std::string, std::string>> JsonReader::printSettings(const
     if (value.is_string())
       text = value.get<std::string>();
     else if (value.is_boolean())
-      text = value.get<bool>() ? "1" : "0";
+      text = value.get<bool>() ? "true" : "false";  // flags only: a number refuses it
     else if (value.is_number_float())
       text = formatNumber(value.get<double>());
     else if (value.is_number())

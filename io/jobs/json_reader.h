@@ -55,10 +55,12 @@ struct DuplicateKey {
   std::string path;
 };
 
-// Follows the parser's events to know the JSON path of each key, and rejects repeated keys.
+// Follows the parser's events to know the JSON path of each key, and rejects repeated keys. For any
+// nlohmann JSON type (the jobs' json, the profiles' ordered_json).
 class DuplicateKeyGuard {
  public:
-  bool operator()(int /*depth*/, Json::parse_event_t event, Json& parsed) {
+  template <class AnyJson>
+  bool operator()(int /*depth*/, Json::parse_event_t event, AnyJson& parsed) {
     switch (event) {
       case Json::parse_event_t::object_start:
         frames_.emplace_back().array = false;
@@ -68,7 +70,7 @@ class DuplicateKeyGuard {
         break;
       case Json::parse_event_t::key: {
         Frame& top = frames_.back();
-        top.key = parsed.get<std::string>();
+        top.key = parsed.template get<std::string>();
         if (!top.keys.insert(top.key).second) throw DuplicateKey{currentPath()};
         break;
       }

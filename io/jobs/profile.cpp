@@ -12,6 +12,7 @@
 #include "core/number_text.h"
 #include "core/print/printer.h"
 #include "io/errors.h"
+#include "io/jobs/json_reader.h"
 #include "io/output_file.h"
 
 namespace toposlice {
@@ -247,7 +248,7 @@ using Json = nlohmann::ordered_json;
 
 std::string jsonValueText(const Json& value, const std::string& where) {
   if (value.is_string()) return value.get<std::string>();
-  if (value.is_boolean()) return value.get<bool>() ? "1" : "0";
+  if (value.is_boolean()) return value.get<bool>() ? "true" : "false";  // for flags only: not a number
   if (value.is_number_integer() || value.is_number_unsigned()) return value.dump();
   if (value.is_number_float()) return formatNumber(value.get<double>());
   throw InputError(where + ": expected a number, a string or true/false, got " + value.dump());
@@ -264,8 +265,12 @@ ProfileFile readProfileFile(const std::filesystem::path& file) {
   std::stringstream buffer;
   buffer << in.rdbuf();
   ProfileFile profile{file, {}};
+  const std::string text = buffer.str();
   try {
-    profile.root = Json::parse(buffer.str());
+    // A repeated key is refused, as in job files (nlohmann would keep the last silently).
+    profile.root = Json::parse(text.begin(), text.end(), jobjson::DuplicateKeyGuard(), true, false);
+  } catch (const jobjson::DuplicateKey& d) {
+    throw InputError(file.string() + ": " + d.path + ": duplicate key (each key may appear once per object)");
   } catch (const nlohmann::json::exception& e) {  // parse errors, and out_of_range 406: a number too large
     throw InputError(file.string() + ": invalid JSON: " + e.what());
   }
