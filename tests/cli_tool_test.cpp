@@ -105,6 +105,13 @@ TEST_F(CliToolInfo, ExamplePartIsClosedWithThreeShells) {
   EXPECT_TRUE(contains(r.out, "boundary edges : 0\n")) << r.out;
   EXPECT_TRUE(contains(r.out, "(binary STL)")) << r.out;
   EXPECT_TRUE(r.err.empty()) << r.describe();
+
+  // -q: errors only (the report was printed anyway); the exit status says whether the file reads.
+  const RunResult quiet = run({"info", examplePart().string(), "-q"});
+  EXPECT_EQ(quiet.code(), 0) << quiet.describe();
+  EXPECT_TRUE(quiet.out.empty() && quiet.err.empty()) << quiet.describe();
+  const RunResult missing = run({"info", "missing.stl", "-q"});
+  expectOneErrorLine(missing);
 }
 
 // The committed example is what its generator makes (examples/generate_example_part.cpp).
@@ -753,6 +760,13 @@ TEST_F(CliToolTemplate, MismatchingVariantsAndBadTablesAreRefused) {
     ASSERT_EQ(rebuilt.code(), 0) << rebuilt.describe();
     EXPECT_TRUE(contains(rebuilt.out, "rebuilt")) << rebuilt.out;
     EXPECT_TRUE(readBytes(path("sw.cli")).starts_with("$$HEADERSTART\n"));
+    // The rebuild is a warning, so that -q does not hide that the variant did not match.
+    const RunResult quiet = run({"slice", "swapped.stl", "-H", "0.5", "--template", "t.topo", "--on-mismatch",
+                                 "rebuild", "-o", "sw.cli", "--force", "-q"});
+    ASSERT_EQ(quiet.code(), 0) << quiet.describe();
+    EXPECT_TRUE(quiet.out.empty()) << quiet.out;
+    EXPECT_TRUE(contains(quiet.err, "toposlice: warning: swapped.stl: does not match the template"))
+        << quiet.err;
   }
 
   const std::string table = readBytes(path("t.topo"));

@@ -92,7 +92,7 @@ MeshReadOptions meshReadOptions(const CommonOptions& common) {
   MeshReadOptions read;
   if (!common.units.empty()) read.unitMm = parseUnits(common.units);
   if (!std::isfinite(common.scale) || !(common.scale > 0))
-    throw InputError("--scale " + std::to_string(common.scale) + ": expected a factor > 0");
+    throw InputError("--scale " + formatNumber(common.scale) + ": expected a factor > 0");
   read.scale = common.scale;
   read.runner = parallelChunkRunner();
   return read;
@@ -150,9 +150,10 @@ FacetSoup readModel(const std::string& model, const MeshReadOptions& read, MeshS
   return readMesh(model, read, source);
 }
 
-int runInfo(const std::string& model, const MeshReadOptions& read) {
+int runInfo(const std::string& model, const MeshReadOptions& read, bool quiet) {
   MeshSource source;
   const FacetSoup soup = readModel(model, read, &source);
+  if (quiet) return 0;  // errors only: the file reads (the exit status says so), no report
   const ChunkRunner runner = parallelChunkRunner();
   const IndexedMesh mesh = weldCorners(soup.corners, runner);
   std::vector<int32_t> table(soup.corners.size());
@@ -611,7 +612,7 @@ int run(int argc, char** argv) {
     // One model, nothing committed while it is read: a stop signal then ends these at once (a batch or a
     // plate may be committing another variant's or plate's outputs meanwhile).
     stopAtOnceWhileReading().store(*info || *preview || *templ || *slice);
-    if (*info) return runInfo(model, meshReadOptions(common));
+    if (*info) return runInfo(model, meshReadOptions(common), common.quiet);
     if (*preview)
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);

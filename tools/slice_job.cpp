@@ -99,6 +99,9 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
     // The reason names the facet, edge and neighbour (or the facet counts) and says the connectivity differs.
     if (!options.rebuildOnMismatch) throw InputError(model.string() + ": " + mismatch->reason);
     result.topology = "template mismatch (" + mismatch->reason + "), rebuilt";
+    // Said on stderr too (never hidden by --quiet): the variant did not share the template's connectivity.
+    result.warnings.push_back(model.string() + ": does not match the template (" + mismatch->reason +
+                              "): its adjacency was rebuilt, as asked");
   }
   if (build) {
     buildTable(soup, built, &result.edges, welded);
