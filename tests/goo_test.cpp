@@ -477,6 +477,19 @@ TEST_F(GooCli, HeaderCarriesTheProfileSettings) {
   EXPECT_EQ(layers.back().exposure, 3.5f);
   EXPECT_EQ(layers.back().liftDistance, 7.0f);
   EXPECT_EQ(layers.back().liftSpeed, 80.0f);
+
+  // A printer name longer than the header's 31 bytes was cut off silently: refused, naming the file.
+  const tool_test::RunResult longName =
+      run({"slice", tool_test::examplePart().string(), "-H", "0.1", "--printer", "sl1", "-q", "--masks",
+           "l.goo", "--printer-model", std::string(32, 'M')});
+  EXPECT_NE(longName.code(), 0);
+  EXPECT_NE(longName.err.find("l.goo: printer_model '"), std::string::npos) << longName.err;
+  EXPECT_NE(longName.err.find("31 at most"), std::string::npos) << longName.err;
+  EXPECT_FALSE(fs::exists(path("l.goo")));
+  EXPECT_EQ(run({"slice", tool_test::examplePart().string(), "-H", "0.1", "--printer", "sl1", "-q", "--masks",
+                 "m.goo", "--printer-model", std::string(31, 'M')})
+                .code(),
+            0);
 }
 
 }  // namespace

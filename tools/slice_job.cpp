@@ -178,6 +178,10 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   // EXR and VDB stacks are volumes in the model's frame, GOO and NanoDLP files landscape images: a
   // preset's portrait display (sl1, sl1s) and its mirroring, which belongs to it, do not apply to them.
   const std::string ext = lowerExtension(o.output);
+  if (ext == ".goo" && print.printerModel.size() > 31)  // it was cut off there without a word
+    throw InputError(o.output.string() + ": printer_model '" + print.printerModel + "' has " +
+                     std::to_string(print.printerModel.size()) +
+                     " bytes, and a GOO header holds a printer name of 31 at most");
   const bool landscapeOnly = ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
   const bool portraitIgnored = print.orientation == "portrait" && landscapeOnly;
   job.grid =
