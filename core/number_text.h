@@ -13,4 +13,11 @@ inline std::string formatNumber(double value) {
   return ec == std::errc{} ? std::string(text, end) : std::string("?");
 }
 
+// A mesh coordinate (float) as the file holds it: "6.2", not the double of that float, 6.199999809265137.
+inline std::string formatNumber(float value) {
+  char text[32];
+  const auto [end, ec] = std::to_chars(text, text + sizeof text, value);
+  return ec == std::errc{} ? std::string(text, end) : std::string("?");
+}
+
 }  // namespace toposlice

@@ -498,11 +498,11 @@ static void checkPlanesCutModel(const std::filesystem::path& model, const std::v
   if (planes.empty())
     throw InputError(model.string() + ": the planes give no layer to slice (layer height " +
                      formatNumber(options.planes.layerHeight.value_or(0)) + " mm)");
-  double zmin = result.bounds.min.z, zmax = result.bounds.max.z;
+  float zmin = result.bounds.min.z, zmax = result.bounds.max.z;  // mesh coordinates, printed as such
   for (std::size_t i = 0; i < options.add.size() && i < features.size(); ++i) {
     const BoundingBox b = boundsOf(features[i].corners);
-    zmin = std::min<double>(zmin, b.min.z);
-    zmax = std::max<double>(zmax, b.max.z);
+    zmin = std::min(zmin, b.min.z);
+    zmax = std::max(zmax, b.max.z);
   }
   std::size_t outside = 0;
   for (const double z : planes) outside += z <= zmin || z >= zmax ? 1 : 0;
