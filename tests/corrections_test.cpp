@@ -873,6 +873,20 @@ TEST_F(CorrectionsCli, SettingsReachTheExrLayersHeaders) {
   ASSERT_EQ(aaLayer.error, "");
   EXPECT_EQ(aaLayer.strings.count("ts:gamma_correction") ? aaLayer.strings.at("ts:gamma_correction") : "none",
             "1");
+  // The display as the images have it: generic-4k has no pixel pitch of its own (display_width 0), --pixel
+  // gives it one, --resolution another size.
+  const RunResult g =
+      this->run({"slice", examplePart().string(), "-H", "1", "--printer", "generic-4k", "--pixel", "0.05",
+                 "--resolution", "1000x800", "--masks", path("g.exr").string(), "-q"});
+  ASSERT_EQ(g.code(), 0) << g.describe();
+  const TinyExrLayer gLayer = readExrWithTinyExr(path("g.exr") / exrLayerFileName("example_part", 0, 7));
+  ASSERT_EQ(gLayer.error, "");
+  for (const auto& [key, value] :
+       std::vector<std::pair<std::string, std::string>>{{"ts:display_pixels_x", "1000"},
+                                                        {"ts:display_pixels_y", "800"},
+                                                        {"ts:display_width", "50"},
+                                                        {"ts:display_height", "40"}})
+    EXPECT_EQ(gLayer.strings.count(key) ? gLayer.strings.at(key) : "none", value) << key;
 }
 
 // The same settings in a VDB file's metadata, as Debian's vdb_print (OpenVDB's own tool) lists them.

@@ -241,8 +241,16 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   job.printerProfile = print.printerName;
   job.materialName = print.materialName;
   job.settings = settingValues(print);
-  for (auto& [key, value] : job.settings)  // unset, --antialias decides: the headers say what it chose
-    if (key == "gamma_correction" && value.empty()) value = job.antiAliased ? "1" : "0";
+  // The display as the images have it: --resolution and --pixel override the printer's, and a printer
+  // without a pixel pitch (generic-4k) gets one from --pixel (the EXR and VDB metadata said 0 there).
+  const auto nanometres = [](double mm) { return std::round(mm * 1e6) / 1e6; };
+  for (auto& [key, value] : job.settings) {
+    if (key == "gamma_correction" && value.empty()) value = job.antiAliased ? "1" : "0";  // as chosen
+    if (key == "display_pixels_x") value = std::to_string(width);
+    if (key == "display_pixels_y") value = std::to_string(height);
+    if (key == "display_width") value = formatNumber(nanometres(width * pixel));
+    if (key == "display_height") value = formatNumber(nanometres(height * pixel));
+  }
   return job;
 }
 
