@@ -134,17 +134,11 @@ class Reader {
       check(NMR::lib3mf_meshobject_gettrianglecount(object, &triangles), object, "mesh");
       e.facets = triangles;
     } else if (isComponents) {
-      DWORD count = 0;
-      check(NMR::lib3mf_componentsobject_getcomponentcount(object, &count), object, "components");
-      for (DWORD i = 0; i < count; ++i) {
-        Lib3mfHandle component, child;
-        check(NMR::lib3mf_componentsobject_getcomponent(object, i, component.out()), object, "component");
-        check(NMR::lib3mf_component_getobjectresource(component.get(), child.out()), component.get(),
-              "component object");
-        const Expansion c = expansionOf(child.get(), depth + 1);
+      forEachComponent(object, [&](NMR::PLib3MFBase*, NMR::PLib3MFBase* child) {
+        const Expansion c = expansionOf(child, depth + 1);
         e.facets = saturatingAdd(e.facets, c.facets);
         e.placements = saturatingAdd(e.placements, c.placements);
-      }
+      });
     }
     expansions_[id] = e;
     return e;
@@ -190,6 +184,16 @@ class Reader {
     if (isMesh) return addMesh(object, placement);
     check(NMR::lib3mf_object_iscomponentsobject(object, &isComponents), object, "object");
     if (!isComponents) return;
+    forEachComponent(object, [&](NMR::PLib3MFBase* component, NMR::PLib3MFBase* child) {
+      const Affine local = transformOf(component, NMR::lib3mf_component_hastransform,
+                                       NMR::lib3mf_component_gettransform, "component transform");
+      addObject(child, compose(placement, local), depth + 1);
+    });
+  }
+
+  // Calls visit(component, its object) for every component of a components object, in order.
+  template <class Visit>
+  void forEachComponent(NMR::PLib3MFBase* object, Visit&& visit) {
     DWORD count = 0;
     check(NMR::lib3mf_componentsobject_getcomponentcount(object, &count), object, "components");
     for (DWORD i = 0; i < count; ++i) {
@@ -197,9 +201,7 @@ class Reader {
       check(NMR::lib3mf_componentsobject_getcomponent(object, i, component.out()), object, "component");
       check(NMR::lib3mf_component_getobjectresource(component.get(), child.out()), component.get(),
             "component object");
-      const Affine local = transformOf(component.get(), NMR::lib3mf_component_hastransform,
-                                       NMR::lib3mf_component_gettransform, "component transform");
-      addObject(child.get(), compose(placement, local), depth + 1);
+      visit(component.get(), child.get());
     }
   }
 
