@@ -427,6 +427,10 @@ TEST_F(PlateTest, OtherConnectivityIsRefusedByNameUnlessRebuildIsAllowed) {
   const PlateResult r = runPlateJob(job(allowed), nullptr);
   EXPECT_EQ(r.built, 1u);
   EXPECT_NE(r.parts[0].topology.find("rebuilt"), std::string::npos);
+  // Said as a warning too (stderr, never hidden by -q), naming the part.
+  ASSERT_EQ(r.warnings.size(), 1u);
+  EXPECT_EQ(r.warnings[0].rfind("part 'odd one': ", 0), 0u) << r.warnings[0];
+  EXPECT_NE(r.warnings[0].find("does not match the template"), std::string::npos) << r.warnings[0];
 }
 
 TEST_F(PlateTest, EveryPartThatCannotBeUsedIsNamedInOneError) {

@@ -607,6 +607,8 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         SliceJobResult topo;
         const TemplateTable* table = spec.templateFile.empty() ? nullptr : &tables.at(spec.templateFile);
         part.adjacency = modelTopology(spec.model, part.model, table, options, topo, part.built);
+        for (const std::string& w : topo.warnings)  // a mismatching part rebuilt ("allow_rebuild")
+          partWarnings[p].push_back("part '" + spec.name + "': " + w);
         part.featureTables.resize(part.features.size());
         if (options.slice.method == SliceMethod::SelfReuse)
           for (std::size_t f = 0; f < part.features.size(); ++f)
