@@ -4,6 +4,7 @@
 #include "io/readers/mesh_reader.h"
 
 #include <gtest/gtest.h>
+#include <zip.h>
 #include <zlib.h>
 
 #include <algorithm>
@@ -584,6 +585,36 @@ TEST(MeshReader, ThreeMfComponentsExpandingPastTheFacetLimitAreRefused) {
             name +
                 ": its build items expand through their components to more than 2147483647 facets, more "
                 "than toposlice slices");
+}
+
+// lib3mf reads a unit it does not know as millimetres, silently (unit="parsec" came out 1:1): refused.
+TEST(MeshReader, ThreeMfUnknownUnitIsRefused) {
+  fixtures::ScratchDir dir;
+  writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_INCH, translation(0, 0, 0), false);
+  // The same package with the model's unit attribute rewritten (libzip, not lib3mf, which writes only
+  // the units it knows).
+  int err = 0;
+  zip_t* zip = zip_open((dir / "cube.3mf").c_str(), 0, &err);
+  ASSERT_NE(zip, nullptr);
+  zip_stat_t st;
+  zip_stat_init(&st);
+  ASSERT_EQ(zip_stat(zip, "3D/3dmodel.model", 0, &st), 0);
+  std::string model(st.size, '\0');
+  zip_file_t* entry = zip_fopen(zip, "3D/3dmodel.model", 0);
+  ASSERT_NE(entry, nullptr);
+  ASSERT_EQ(zip_fread(entry, model.data(), st.size), static_cast<zip_int64_t>(st.size));
+  zip_fclose(entry);
+  const std::size_t unit = model.find("unit=\"inch\"");
+  ASSERT_NE(unit, std::string::npos) << model.substr(0, 300);
+  model.replace(unit, 11, "unit=\"parsec\"");
+  zip_source_t* source = zip_source_buffer(zip, model.data(), model.size(), 0);
+  ASSERT_GE(zip_file_add(zip, "3D/3dmodel.model", source, ZIP_FL_OVERWRITE), 0);
+  ASSERT_EQ(zip_close(zip), 0);
+  const std::string name = (dir / "cube.3mf").string();
+  EXPECT_EQ(
+      errorOf([&] { readMesh(dir / "cube.3mf"); }),
+      name +
+          ": unknown 3MF unit 'parsec' (a 3MF states micron, millimeter, centimeter, inch, foot or meter)");
 }
 
 TEST(MeshReader, ThreeMfDamagedPackage) {

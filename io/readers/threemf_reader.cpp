@@ -8,6 +8,8 @@
 #include <map>
 #include <vector>
 
+#include <zip.h>
+
 #include "Model/COM/NMR_DLLInterfaces.h"
 #include "io/readers/byte_input.h"
 #include "io/readers/lib3mf_handle.h"
@@ -57,6 +59,59 @@ double determinant(const Affine& m) {
          m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
 }
 
+// The first `limit` bytes (at most) of the zip entry `entry` of `bytes`, empty when there is none or it
+// cannot be read.
+std::string zipEntryText(std::span<const std::byte> bytes, const std::string& entry, std::size_t limit) {
+  zip_error_t error;
+  zip_error_init(&error);
+  zip_source_t* source = zip_source_buffer_create(bytes.data(), bytes.size(), 0, &error);
+  zip_t* archive = source != nullptr ? zip_open_from_source(source, ZIP_RDONLY, &error) : nullptr;
+  std::string text;
+  if (archive == nullptr) {
+    if (source != nullptr) zip_source_free(source);
+  } else {
+    zip_stat_t st;
+    zip_stat_init(&st);
+    if (zip_stat(archive, entry.c_str(), 0, &st) == 0 && (st.valid & ZIP_STAT_SIZE)) {
+      if (zip_file_t* file = zip_fopen(archive, entry.c_str(), 0)) {
+        text.resize(std::min<std::size_t>(st.size, limit));
+        const zip_int64_t n = zip_fread(file, text.data(), text.size());
+        text.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
+        zip_fclose(file);
+      }
+    }
+    zip_discard(archive);  // frees the source too
+  }
+  zip_error_fini(&error);
+  return text;
+}
+
+// The unit attribute of the package's root model, as written ("" when it states none, the millimetre).
+// lib3mf takes a unit it does not know for millimetres without a word (unit="parsec" read 1:1), so the
+// reader checks the attribute itself.
+std::string statedUnit(std::span<const std::byte> bytes) {
+  std::string root = "3D/3dmodel.model";
+  const std::string rels = zipEntryText(bytes, "_rels/.rels", 1 << 16);
+  if (const std::size_t type = rels.find("/3dmodel\""); type != std::string::npos) {
+    const std::size_t begin = rels.rfind('<', type), end = rels.find('>', type);
+    const std::string relationship = rels.substr(begin, end - begin);
+    if (const std::size_t t = relationship.find("Target=\""); t != std::string::npos) {
+      const std::size_t close = relationship.find('"', t + 8);
+      if (close != std::string::npos) root = relationship.substr(t + 8, close - t - 8);
+    }
+  }
+  if (!root.empty() && root[0] == '/') root.erase(0, 1);
+  const std::string model = zipEntryText(bytes, root, 1 << 16);  // the <model> tag opens the part
+  const std::size_t tag = model.find("<model");
+  if (tag == std::string::npos) return "";
+  const std::string start = model.substr(tag, model.find('>', tag) - tag);
+  const std::size_t unit = start.find(" unit=");
+  if (unit == std::string::npos || unit + 7 >= start.size()) return "";
+  const char quote = start[unit + 6];
+  const std::size_t close = start.find(quote, unit + 7);
+  return close == std::string::npos ? "" : start.substr(unit + 7, close - unit - 7);
+}
+
 class Reader {
  public:
   Reader(const std::string& name, double factor, ThreeMfSource& source, FacetSoup& soup)
@@ -75,6 +130,9 @@ class Reader {
     DWORD unit = 0;
     check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
     setUnit(unit);
+    if (const std::string stated = statedUnit(bytes); !stated.empty() && stated != source_.unit)
+      throwInputError(name_, "unknown 3MF unit '" + stated +
+                                 "' (a 3MF states micron, millimeter, centimeter, inch, foot or meter)");
 
     Lib3mfHandle items;
     check(NMR::lib3mf_model_getbuilditems(model.get(), items.out()), model.get(), "build items");
