@@ -491,6 +491,35 @@ TEST_F(PlateTest, CollidingOutputsAndAFailedJobsOutputFolder) {
   EXPECT_FALSE(fs::exists(dir_ / "o5")) << "the folders -O made stay behind";
 }
 
+// "mirror" is the display's mirroring: "none" turns the SL1's own x mirror off (it was ORed with the
+// printer's, so none and x gave the same masks), and the settings say what was used.
+TEST_F(PlateTest, MirrorSettingReplacesThePrintersMirror) {
+  const std::string part =
+      "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  std::map<std::string, std::string> first;
+  for (const char* mirror : {"none", "x", "y", "xy"}) {
+    const fs::path out = dir_ / (std::string("m-") + mirror);
+    runPlateJob(job("{\"printer\": \"sl1\", \"settings\": {\"layer_height\": 2, \"mirror\": \"" +
+                    std::string(mirror) + "\"}, \"parts\": [" + part +
+                    "], \"outputs\": {\"masks\": " + q(out) + "}}"),
+                nullptr);
+    std::vector<fs::path> layers;
+    for (const auto& e : fs::directory_iterator(out)) layers.push_back(e.path());
+    std::sort(layers.begin(), layers.end());
+    ASSERT_FALSE(layers.empty());
+    first[mirror] = tool_test::readBytes(layers[layers.size() / 2]);
+  }
+  EXPECT_NE(first["none"], first["x"]);
+  EXPECT_NE(first["y"], first["xy"]);
+  EXPECT_NE(first["none"], first["y"]);
+  PlateJob given = job("{\"printer\": \"sl1\", \"settings\": {\"mirror\": \"none\"}, \"parts\": [" + part +
+                       "], \"outputs\": {\"masks\": \"p.sl1\"}}");
+  given.sourceFile = dir_ / "job.json";
+  const PrintSettings print = plateJobSettings(given);
+  EXPECT_FALSE(print.mirrorX);
+  EXPECT_EQ(print.origin.at("display_mirror_x"), "plate job settings.mirror");
+}
+
 // Settings that cannot apply to the plate job are errors naming the key, not silently ignored.
 TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
   const std::string part =

@@ -60,9 +60,11 @@ bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
 }
 
 PrintSettings batchJobSettings(const BatchJob& job) {
-  return resolvePrintSettings({job.profile, job.printer, job.material, job.printSettings,
-                               "batch job print_settings", job.sourceFile.string() + ": settings.printer",
-                               job.sourceFile.string() + ": settings.material"});
+  PrintSettings print = resolvePrintSettings(
+      {job.profile, job.printer, job.material, job.printSettings, "batch job print_settings",
+       job.sourceFile.string() + ": settings.printer", job.sourceFile.string() + ": settings.material"});
+  applyJobMirror(print, job.mirrorX, job.mirrorY, "batch job settings.mirror");
+  return print;
 }
 
 SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,

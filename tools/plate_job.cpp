@@ -539,9 +539,11 @@ struct PreparedPlateJob::Impl {
 };
 
 PrintSettings plateJobSettings(const PlateJob& job) {
-  return resolvePrintSettings({job.profile, job.printer, job.material, job.printSettings,
-                               "plate job print_settings", job.sourceFile.string() + ": printer",
-                               job.sourceFile.string() + ": material"});
+  PrintSettings print = resolvePrintSettings(
+      {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings",
+       job.sourceFile.string() + ": printer", job.sourceFile.string() + ": material"});
+  applyJobMirror(print, job.mirrorX, job.mirrorY, "plate job settings.mirror");
+  return print;
 }
 
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {

@@ -506,6 +506,12 @@ PrintSettings resolvePrintSettings(const ProfileChoice& choice) {
   return settings;
 }
 
+void applyJobMirror(PrintSettings& settings, std::optional<bool> mirrorX, std::optional<bool> mirrorY,
+                    const std::string& origin) {
+  if (mirrorX) assignSetting(settings, "display_mirror_x", *mirrorX ? "1" : "0", origin);
+  if (mirrorY) assignSetting(settings, "display_mirror_y", *mirrorY ? "1" : "0", origin);
+}
+
 std::vector<std::pair<std::string, std::string>> settingValues(const PrintSettings& settings) {
   std::vector<std::pair<std::string, std::string>> values;
   for (const SettingKey& k : kKeys) values.emplace_back(k.name, ruleOf(k.name).show(settings));

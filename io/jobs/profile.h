@@ -116,6 +116,12 @@ PrintSettings resolvePrintSettings(const ProfileChoice& choice);
 void assignSetting(PrintSettings& settings, std::string_view key, std::string_view value,
                    const std::string& origin);
 
+// A job's "mirror" setting (batch and plate jobs: none, x, y or xy, both set or neither) is the display's
+// mirroring: it replaces the printer's display_mirror_x/_y ("none" turns a printer's mirror off), with
+// `origin` as where they came from.
+void applyJobMirror(PrintSettings& settings, std::optional<bool> mirrorX, std::optional<bool> mirrorY,
+                    const std::string& origin);
+
 // Every key with its value as text, in settingKeys() order (for the SL1 ini files, the summary and
 // metadata): numbers in the shortest form that reads back exactly, flags as 0/1.
 std::vector<std::pair<std::string, std::string>> settingValues(const PrintSettings& settings);
