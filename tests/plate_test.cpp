@@ -520,6 +520,24 @@ TEST_F(PlateTest, MirrorSettingReplacesThePrintersMirror) {
   EXPECT_EQ(print.origin.at("display_mirror_x"), "plate job settings.mirror");
 }
 
+// A spacing wider than the plate: every part apart from every other; the arrangement's grids grew with it
+// until the job ran out of memory. Refused naming the key, the number as typed.
+TEST_F(PlateTest, SpacingWiderThanThePlateIsRefused) {
+  const std::string part =
+      "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  try {
+    runPlateJob(job("{\"printer\": \"sl1\", \"arrange\": {\"spacing\": 100000}, \"parts\": [" + part +
+                    "], \"outputs\": {\"masks\": \"p.sl1\"}}"),
+                nullptr);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("arrange.spacing: 100000 mm is more than the plate's diagonal"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "p.sl1"));
+}
+
 // Settings that cannot apply to the plate job are errors naming the key, not silently ignored.
 TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
   const std::string part =

@@ -553,6 +553,12 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   const PrintSettings& print = impl_->print;
   impl_->geometry = plateGeometry(job, print);
   const PlateGeometry& geometry = impl_->geometry;
+  // A spacing wider than the plate keeps every part from every other on any plate; the arrangement's
+  // grids grow with it (10^5 mm ran out of memory): a mistake, said as one.
+  if (const double diagonal = std::hypot(geometry.widthMm(), geometry.heightMm()); job.spacing > diagonal)
+    throw InputError(job.sourceFile.string() + ": arrange.spacing: " + formatNumber(job.spacing) +
+                     " mm is more than the plate's diagonal (" + formatNumber(diagonal) +
+                     " mm): no two parts could share a plate");
   checkMaskSettings(print, job.antialias, !job.masks.empty(), "settings.antialias");
   PlateResult& result = impl_->result;
   const std::size_t count = job.parts.size();
