@@ -538,6 +538,34 @@ TEST_F(PlateTest, SpacingWiderThanThePlateIsRefused) {
   EXPECT_FALSE(fs::exists(dir_ / "p.sl1"));
 }
 
+// A job run again with fewer plates left the earlier run's later plates beside its own, silently: a
+// script collecting p*.sl1 would print a plate of the old job. They stay (never deleted), with a warning.
+TEST_F(PlateTest, LaterPlatesOfAnEarlierRunAreAWarning) {
+  const std::string part =
+      "{\"name\": \"%s\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  const auto text = [&](int parts) {
+    std::string list;
+    for (int i = 0; i < parts; ++i) {
+      char one[4096];
+      std::snprintf(one, sizeof one, part.c_str(), std::string(1, static_cast<char>('a' + i)).c_str());
+      list += (i > 0 ? ", " : "") + std::string(one);
+    }
+    return "{\"printer\": \"sl1\", \"settings\": {\"layer_height\": 1, \"overwrite\": true, \"pixel\": 0.1, "
+           "\"resolution\": [300, 250]}, \"parts\": [" +
+           list + "], \"outputs\": {\"masks\": \"p.sl1\"}}";
+  };
+  const PlateResult three = runPlateJob(job(text(3)), nullptr);
+  ASSERT_EQ(three.plates, 3u);
+  EXPECT_TRUE(three.warnings.empty());
+  const PlateResult one = runPlateJob(job(text(1)), nullptr);
+  ASSERT_EQ(one.plates, 1u);
+  ASSERT_EQ(one.warnings.size(), 1u);
+  EXPECT_NE(one.warnings[0].find("p-plate2.sl1 and 1 more file of later plates exist from an earlier run"),
+            std::string::npos)
+      << one.warnings[0];
+  EXPECT_TRUE(fs::exists(dir_ / "p-plate3.sl1"));
+}
+
 // Settings that cannot apply to the plate job are errors naming the key, not silently ignored.
 TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
   const std::string part =

@@ -703,6 +703,7 @@ int runPlateRank(const Options& options, int rank, int size) {
       prepared->writeReport();
       all.commit();
       result.written = all.committed();
+      warnAboutLaterPlates(job, result);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "toposlice-mpi: error: %s\n", e.what());
       status = 1;

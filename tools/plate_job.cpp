@@ -792,6 +792,29 @@ void PreparedPlateJob::writeReport() const {
   }
 }
 
+void warnAboutLaterPlates(const PlateJob& job, PlateResult& result) {
+  std::vector<std::string> stale;
+  for (uint32_t plate = result.plates; plate < result.plates + 1000; ++plate) {
+    bool any = false;
+    forEachPlateOutput(job, plate, plate + 1, [&](const std::filesystem::path& path, bool) {
+      if (outputPathExists(path)) {
+        any = true;
+        stale.push_back(path.string());
+      }
+    });
+    if (!any) break;
+  }
+  if (stale.empty()) return;
+  const std::size_t more = stale.size() - 1;
+  result.warnings.push_back(stale.front() +
+                            (more > 0
+                                 ? " and " + std::to_string(more) +
+                                       (more == 1 ? " more file" : " more files") + " of later plates exist"
+                                 : " exists") +
+                            " from an earlier run; this job made " + std::to_string(result.plates) +
+                            (result.plates == 1 ? " plate" : " plates") + " and left them as they were");
+}
+
 PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress,
                         const std::function<void(uint32_t, uint32_t)>& onPlate) {
   PreparedPlateJob prepared(job);
@@ -807,6 +830,7 @@ PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress,
   prepared.writeReport();
   transaction.commit(&interruptRequested());
   result.written = transaction.committed();
+  warnAboutLaterPlates(job, result);
   return std::move(result);
 }
 

@@ -94,6 +94,11 @@ class PreparedPlateJob {
 // The summary `toposlice plate` prints: plates, one line per part, the outputs written, the seconds.
 void printPlateSummary(std::FILE* out, const PlateResult& result);
 
+// After a job: files of plates beyond result.plates at the job's output names, left by an earlier run
+// that made more plates, are a warning in result.warnings (not this job's output, never deleted, but a
+// script collecting "p*.sl1" would print them).
+void warnAboutLaterPlates(const PlateJob& job, PlateResult& result);
+
 // The job as the command runs it: read, and with a non-empty `outputDir` every output moved there under
 // its file name.
 PlateJob readPlateCommandJob(const std::filesystem::path& jobPath, const std::filesystem::path& outputDir);
