@@ -632,6 +632,20 @@ TEST_F(OptionChecks, TemplateWithTheClosestPointMethodIsAnError) {
             0);
 }
 
+// A batch variant too large for the image was told to use --crop and --origin, which a batch job has
+// not: its own setting is named.
+TEST_F(OptionChecks, ABatchVariantThatDoesNotFitIsToldWhatTheJobCanDo) {
+  writeBytes(path("job.json"), R"({"version": 1, "template": {"model": ")" + examplePart().string() +
+                                   R"("}, "settings": {"layer_height": 1, "printer": "sl1", "units": "cm"},
+      "variants": [{"name": "big", "model": ")" +
+                                   examplePart().string() + R"(", "masks": "big.sl1"}]})");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  EXPECT_NE(r.code(), 0);
+  EXPECT_TRUE(contains(r.err, "does not fit")) << r.err;
+  EXPECT_TRUE(contains(r.err, "set settings.origin")) << r.err;
+  EXPECT_FALSE(contains(r.err, "--crop")) << r.err;
+}
+
 TEST_F(OptionChecks, UnevenPlanesAreRefusedForPrinterFiles) {
   for (const char* masks : {"u.sl1", "u.goo", "u.nanodlp"}) {
     const RunResult r = run(

@@ -566,6 +566,32 @@ TEST_F(PlateTest, LaterPlatesOfAnEarlierRunAreAWarning) {
   EXPECT_TRUE(fs::exists(dir_ / "p-plate3.sl1"));
 }
 
+// Messages that named neither the part nor the missing key: an unreadable template (shared by parts,
+// named by the first that uses it), and no printer with a profile of several.
+TEST_F(PlateTest, TemplateAndPrinterProblemsNameThePartAndTheKey) {
+  tool_test::writeBytes(dir_ / "bad.topo", "solid x\n");
+  const std::string part = "{\"name\": \"b\", \"model\": " + q(tool_test::examplePart()) +
+                           ", \"template\": \"bad.topo\", \"placement\": \"auto\"}";
+  const auto message = [&](const std::string& text) {
+    try {
+      runPlateJob(job(text), nullptr);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_EQ(message("{\"printer\": \"sl1\", \"parts\": [" + part + "], \"outputs\": {\"masks\": \"p.sl1\"}}")
+                .rfind("part 'b': template: ", 0),
+            0u);
+  tool_test::writeBytes(dir_ / "two.json",
+                        R"({"printers": {"a": {"inherits": "sl1"}, "b": {"inherits": "sl1s"}}})");
+  const std::string plain =
+      "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  const std::string noPrinter =
+      message("{\"profile\": \"two.json\", \"parts\": [" + plain + "], \"outputs\": {\"masks\": \"p.sl1\"}}");
+  EXPECT_NE(noPrinter.find("printer: missing, and the profile"), std::string::npos) << noPrinter;
+}
+
 // Settings that cannot apply to the plate job are errors naming the key, not silently ignored.
 TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
   const std::string part =

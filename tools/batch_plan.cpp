@@ -96,6 +96,7 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
   o.masks.mirrorX = job.mirrorX.value_or(false);
   o.masks.mirrorY = job.mirrorY.value_or(false);
   o.masks.antialias = job.antialias;
+  o.masks.fitAdvice = "set settings.origin to move the image, or use a smaller model or larger pixels";
   o.print = batchJobSettings(job);
   o.add = variant.add;
   o.remove = variant.remove;

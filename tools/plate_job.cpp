@@ -126,6 +126,11 @@ PlateGeometry plateGeometry(const PlateJob& job, const PrintSettings& print) {
   const std::string where =
       (job.sourceFile.empty() ? "" : job.sourceFile.string() + ": ") +
       (print.printerName.empty() ? "the printer" : "printer '" + print.printerName + "'");
+  if (print.printerName.empty() && !job.profile.empty() && !job.resolution)  // a profile of several printers
+    throw InputError((job.sourceFile.empty() ? "" : job.sourceFile.string() + ": ") +
+                     "printer: missing, and the profile " + job.profile.string() +
+                     " does not hold exactly one printer to take: name one (or give settings.resolution and "
+                     "settings.pixel)");
   if (g.width == 0 || g.height == 0)
     throw InputError(where + " has no display size: give settings.resolution, or display_pixels_x and _y");
   if (!(g.pixel > 0))
@@ -581,9 +586,14 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   // Read every part (and each distinct template table once), in parallel across parts.
   auto start = std::chrono::steady_clock::now();
   std::map<std::filesystem::path, TemplateTable>& tables = impl_->tables;
-  for (const PlatePart& p : job.parts)
-    if (!p.templateFile.empty() && !tables.count(p.templateFile))
+  for (const PlatePart& p : job.parts) {
+    if (p.templateFile.empty() || tables.count(p.templateFile)) continue;
+    try {
       tables[p.templateFile] = readTemplateFile(p.templateFile);
+    } catch (const InputError& e) {  // named by the first part that uses it, as a part's model is
+      throw InputError("part '" + p.name + "': template: " + e.what());
+    }
+  }
   MeshReadOptions read;
   read.unitMm = job.unitMm;
   read.scale = job.scale;

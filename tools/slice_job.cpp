@@ -206,14 +206,13 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
                     side.side);
       where += part;
     }
-    char text[512];
+    char text[640];
     std::snprintf(
         text, sizeof text,
         "the model (x %.3f .. %.3f, y %.3f .. %.3f mm) does not fit the %ux%u image at %g mm pixels "
-        "(x %.3f .. %.3f, y %.3f .. %.3f mm): it sticks out %s (use --crop to cut it off, --origin "
-        "to move the image, a smaller model or larger pixels)",
+        "(x %.3f .. %.3f, y %.3f .. %.3f mm): it sticks out %s (%s)",
         extent.min.x, extent.max.x, extent.min.y, extent.max.y, width, height, pixel, job.grid.x0, x1,
-        job.grid.y0, y1, where.c_str());
+        job.grid.y0, y1, where.c_str(), o.fitAdvice.c_str());
     throw InputError(text);
   }
   const auto orientationSetBy = print.origin.find("display_orientation");

@@ -33,6 +33,10 @@ struct MaskOptions {
   bool antialias = false;
   bool crop = false;      // allow a model larger than the image
   bool vdbSlabs = false;  // .vdb only: one grid per slab of layers instead of one grid (--vdb-layout slabs)
+  // What a model that does not fit the image may do, in the words of the command (a batch job has no
+  // --crop, and its origin is a setting).
+  std::string fitAdvice =
+      "use --crop to cut it off, --origin to move the image, a smaller model or larger pixels";
 };
 
 struct SliceJobOptions {
