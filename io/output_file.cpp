@@ -181,10 +181,12 @@ std::filesystem::path resolvedPath(const std::filesystem::path& path) {
 
 namespace {
 std::string gOverwriteHint = "use --force to overwrite";
+std::string gForceName = "--force";
 }  // namespace
 
-void setOverwriteHint(std::string hint) {
+void setOverwriteHint(std::string hint, std::string forceName) {
   gOverwriteHint = std::move(hint);
+  gForceName = std::move(forceName);
 }
 
 std::string outputExistsMessage(const std::filesystem::path& p) {
@@ -404,7 +406,7 @@ void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::s
   if (ec || st.type() == fs::file_type::not_found) return;
   // A link is replaced, never followed: what it points to stays as it is.
   if (st.type() == fs::file_type::symlink) return;
-  const std::string refused = ", even with --force";
+  const std::string refused = ", even with " + gForceName;
   if (kind == OutputKind::File) {
     if (st.type() == fs::file_type::directory)
       throw OutputError(path.string() +

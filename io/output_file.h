@@ -103,9 +103,10 @@ std::filesystem::path resolvedPath(const std::filesystem::path& path);
 // "<path>: already exists (use --force to overwrite)", the one message for a refused output.
 std::string outputExistsMessage(const std::filesystem::path& path);
 
-// What that message tells the user to do (default "use --force to overwrite"): commands whose jobs say
-// it in their JSON set it once at the start, before any thread runs.
-void setOverwriteHint(std::string hint);
+// What that message tells the user to do (default "use --force to overwrite"), and what a refusal of
+// another program's file says was not enough (default "--force"): commands whose jobs say it in their
+// JSON set them once at the start, before any thread runs.
+void setOverwriteHint(std::string hint, std::string forceName = "--force");
 
 // The reason a file or folder cannot be created at `path`, naming the folder rather than a temporary:
 // "<path>: cannot create: folder 'out' does not exist" (ENOENT), "...: no permission to write in folder

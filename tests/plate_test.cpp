@@ -590,6 +590,33 @@ TEST_F(PlateTest, TemplateAndPrinterProblemsNameThePartAndTheKey) {
   const std::string noPrinter =
       message("{\"profile\": \"two.json\", \"parts\": [" + plain + "], \"outputs\": {\"masks\": \"p.sl1\"}}");
   EXPECT_NE(noPrinter.find("printer: missing, and the profile"), std::string::npos) << noPrinter;
+
+  // A given rotation beyond a turn (1e300 turned the part by a floating-point remainder and printed 300
+  // digits in the summary).
+  for (const char* rotation : {"1e300", "720", "-361"}) {
+    const std::string placed = "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) +
+                               ", \"placement\": {\"x\": 30, \"y\": 20, \"rotation\": " + rotation + "}}";
+    const std::string what =
+        message("{\"printer\": \"sl1\", \"parts\": [" + placed + "], \"outputs\": {\"masks\": \"p.sl1\"}}");
+    EXPECT_NE(what.find("parts[0].placement.rotation: must be a number of degrees from -360 to 360"),
+              std::string::npos)
+        << what;
+  }
+}
+
+// A plate job has no --force: its refusal of another program's file names what it has.
+TEST_F(PlateTest, ForeignFileRefusalNamesTheOverwriteSetting) {
+  tool_test::writeBytes(dir_ / "p.png", "not a picture toposlice wrote");
+  tool_test::writeBytes(dir_ / "job.json",
+                        "{\"printer\": \"sl1\", \"settings\": {\"layer_height\": 1, "
+                        "\"overwrite\": true}, \"parts\": [{\"name\": \"a\", \"model\": " +
+                            q(tool_test::examplePart()) +
+                            ", \"placement\": \"auto\"}], \"outputs\": {\"masks\": "
+                            "\"p.sl1\", \"picture\": \"p.png\"}}");
+  const tool_test::RunResult r = run({"plate", (dir_ / "job.json").string(), "-q"});
+  EXPECT_NE(r.code(), 0);
+  EXPECT_NE(r.err.find("not replaced, even with \"overwrite\": true"), std::string::npos) << r.err;
+  EXPECT_EQ(tool_test::readBytes(dir_ / "p.png"), "not a picture toposlice wrote");
 }
 
 // Settings that cannot apply to the plate job are errors naming the key, not silently ignored.

@@ -608,7 +608,8 @@ int run(int argc, char** argv) {
   // write fails with EFBIG instead and the job ends as on a full disk, leaving nothing behind.
   std::signal(SIGXFSZ, SIG_IGN);
   auto runCommand = [&]() -> int {
-    if (*plate || *batch) setOverwriteHint("set \"overwrite\": true in the job's settings to replace it");
+    if (*plate || *batch)
+      setOverwriteHint("set \"overwrite\": true in the job's settings to replace it", "\"overwrite\": true");
     // One model, nothing committed while it is read: a stop signal then ends these at once (a batch or a
     // plate may be committing another variant's or plate's outputs meanwhile).
     stopAtOnceWhileReading().store(*info || *preview || *templ || *slice);

@@ -770,7 +770,8 @@ int run(int argc, char** argv) {
   // A file-size limit (ulimit -f) would kill the process with its temporaries in place; ignored, the
   // write fails with EFBIG instead and the job ends as on a full disk, leaving nothing behind.
   std::signal(SIGXFSZ, SIG_IGN);
-  setOverwriteHint("set \"overwrite\": true in the job's settings to replace it");  // no --force here
+  setOverwriteHint("set \"overwrite\": true in the job's settings to replace it",  // no --force here
+                   "\"overwrite\": true");
   int status = 1;
   {
     ThreadLimit limit(options.threads);

@@ -675,7 +675,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   if (print.maxPrintHeight > 0 &&
       double{measures.bounds.max.z} - measures.bounds.min.z > print.maxPrintHeight)
     throw InputError(model.string() + ": the model is " +
-                     formatNumber(double{measures.bounds.max.z} - measures.bounds.min.z) +
+                     formatNumber(measures.bounds.max.z - measures.bounds.min.z) +  // a float: "6.2"
                      " mm tall, more than the printer's max_print_height " +
                      formatNumber(print.maxPrintHeight) + " mm" +
                      (print.scales() ? " (after the scaling correction)" : ""));

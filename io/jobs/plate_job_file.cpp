@@ -163,7 +163,12 @@ class PlateParser : public JsonReader {
         PlatePlacement placement;
         placement.x = number(require(p, pat, "x"), childPath(pat, "x"));
         placement.y = number(require(p, pat, "y"), childPath(pat, "y"));
-        if (const Json* r = find(p, "rotation")) placement.rotation = number(*r, childPath(pat, "rotation"));
+        if (const Json* r = find(p, "rotation")) {
+          placement.rotation = number(*r, childPath(pat, "rotation"));
+          if (!(std::abs(placement.rotation) <= 360))  // 1e300 turned the part by a rounding remainder
+            fail(childPath(pat, "rotation"),
+                 "must be a number of degrees from -360 to 360, got " + r->dump());
+        }
         if (!std::isfinite(placement.x) || !std::isfinite(placement.y) || !std::isfinite(placement.rotation))
           fail(pat, "must hold finite numbers");
         part.placement = placement;
