@@ -45,7 +45,8 @@ const char* gInterruptedMessage = "interrupted; no output was left behind";
 
 // First SIGINT/SIGTERM: ask the running job to stop at the next band; it unwinds, every temporary
 // (files and staged folders) is removed by its owner, and run() then dies by the same signal. A second
-// signal stops at once, removing the temporary files it can from the handler.
+// signal stops at once, removing the temporary files it can from the handler; so does the first while a
+// single-model command reads its input (ReadScope: a read may block, and nothing is committed yet).
 extern "C" void onSignal(int signal) {
   const bool again = gSignal != 0;
   if (again || (stopAtOnceWhileReading().load() && readsInProgress().load() > 0)) {
