@@ -473,16 +473,11 @@ void validateSliceOptions(const SliceJobOptions& options) {
     // A printer file moves the platform by one layer height for every layer: uneven planes would print
     // a part of another height (planes 0.5, 1, 3, 6 as 0.5, 1, 1.5, 2), so they are refused there.
     const bool printerFile = ext == ".sl1" || ext == ".sl1s" || ext == ".goo" || ext == ".nanodlp";
-    if (printerFile && z.size() >= 3) {
-      const double step = z[1] - z[0];
-      for (std::size_t i = 2; i < z.size(); ++i)
-        if (std::abs((z[i] - z[i - 1]) - step) > 1e-9 * std::max(1.0, std::abs(z[i])))
-          throw InputError("--z: the planes are not evenly spaced (" + formatNumber(z[1] - z[0]) +
-                           " mm, then " + formatNumber(z[i] - z[i - 1]) + " mm), and " +
-                           options.masks.output.string() +
-                           " moves the platform by one layer height for every layer: give even planes or "
-                           "--layer-height, or write a PNG folder, .exr or .vdb");
-    }
+    if (const std::size_t i = firstUnevenPlane(z); printerFile && i < z.size())
+      throw InputError("--z: the planes are not evenly spaced (" + formatNumber(z[1] - z[0]) + " mm, then " +
+                       formatNumber(z[i] - z[i - 1]) + " mm), and " + options.masks.output.string() +
+                       " moves the platform by one layer height for every layer: give even planes or "
+                       "--layer-height, or write a PNG folder, .exr or .vdb");
   }
   for (const auto& path : options.outputs) {
     const std::string ext = lowerExtension(path);

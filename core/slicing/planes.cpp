@@ -127,4 +127,10 @@ bool parseZList(const std::string& text, std::vector<double>& out, std::string* 
   return true;
 }
 
+std::size_t firstUnevenPlane(const std::vector<double>& z) {
+  for (std::size_t i = 2; i < z.size(); ++i)
+    if (std::abs((z[i] - z[i - 1]) - (z[1] - z[0])) > 1e-9 * std::max(1.0, std::abs(z[i]))) return i;
+  return z.size();
+}
+
 }  // namespace toposlice

@@ -22,6 +22,11 @@ struct PlaneSpec {
 // vector) when the specification cannot make planes (non-positive height, no layers, unsorted list...).
 std::vector<double> makePlanes(const PlaneSpec& spec, double zmin, double zmax, std::string& error);
 
+// The first plane of an explicit list whose distance to the one before differs from the first distance
+// (beyond rounding: 1e-9 relative), or z.size() when the planes are evenly spaced. Printer files carry one
+// layer height, so they need even planes.
+std::size_t firstUnevenPlane(const std::vector<double>& z);
+
 // Parses "0.1,0.2,0.35" (commas or whitespace) into values; returns false on malformed text.
 bool parseZList(const std::string& text, std::vector<double>& out, std::string* error = nullptr);
 

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/slicing/planes.h"
 #include "io/errors.h"
 #include "io/jobs/json_reader.h"
 #include "io/jobs/profile.h"
@@ -165,14 +166,12 @@ class JobParser : public JsonReader {
       if (const std::string why = settingUnusedReason(k, masks, "a variant with masks"); !why.empty())
         fail(childPath(childPath("settings", "print_settings"), k), "does nothing in this job: " + why);
     // Printer files carry one layer height (as slice's --z): uneven planes would print another part.
-    const std::vector<double>& z = job_.explicitZ;
     for (const auto& m : masks) {
       const std::string ext = lowerExtension(m);
-      if (ext != ".sl1" && ext != ".sl1s" && ext != ".goo" && ext != ".nanodlp") continue;
-      for (std::size_t i = 2; i < z.size(); ++i)
-        if (std::abs((z[i] - z[i - 1]) - (z[1] - z[0])) > 1e-9 * std::max(1.0, std::abs(z[i])))
-          fail(childPath("settings", "z"), "the planes are not evenly spaced, and " + m.string() +
-                                               " moves the platform by one layer height for every layer");
+      if ((ext == ".sl1" || ext == ".sl1s" || ext == ".goo" || ext == ".nanodlp") &&
+          firstUnevenPlane(job_.explicitZ) < job_.explicitZ.size())
+        fail(childPath("settings", "z"), "the planes are not evenly spaced, and " + m.string() +
+                                             " moves the platform by one layer height for every layer");
     }
   }
 
