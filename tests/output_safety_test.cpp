@@ -646,6 +646,30 @@ TEST_F(OptionChecks, ABatchVariantThatDoesNotFitIsToldWhatTheJobCanDo) {
   EXPECT_FALSE(contains(r.err, "--crop")) << r.err;
 }
 
+// Batch variants write every printer file slice writes (they took .sl1, .exr and .vdb only), with the
+// job's printer settings: the same bytes as slice gives, but for the archives' dates.
+TEST_F(OptionChecks, BatchVariantsWriteEveryPrinterFile) {
+  writeBytes(path("job.json"), R"({"version": 1, "template": {"model": ")" + examplePart().string() +
+                                   R"("}, "settings": {"layer_height": 1, "printer": "sl1",
+      "print_settings": {"lift_speed": 70}}, "variants": [
+      {"name": "g", "model": ")" + examplePart().string() +
+                                   R"(", "masks": "g.goo"},
+      {"name": "n", "model": ")" + examplePart().string() +
+                                   R"(", "masks": "n.nanodlp"},
+      {"name": "s", "model": ")" + examplePart().string() +
+                                   R"(", "masks": "s.sl1s"}]})");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_TRUE(readBytes(path("g.goo")).starts_with(std::string("V3.0\x07\0\0\0DLP\0toposlice", 21)));
+  EXPECT_TRUE(readBytes(path("n.nanodlp")).starts_with("PK\x03\x04"));
+  EXPECT_TRUE(readBytes(path("s.sl1s")).starts_with("PK\x03\x04"));
+  ASSERT_EQ(run({"slice", examplePart().string(), "-H", "1", "--printer", "sl1", "--lift-speed", "70",
+                 "--masks", "alone.goo", "-q"})
+                .code(),
+            0);
+  EXPECT_EQ(readBytes(path("g.goo")).size(), readBytes(path("alone.goo")).size());
+}
+
 TEST_F(OptionChecks, UnevenPlanesAreRefusedForPrinterFiles) {
   for (const char* masks : {"u.sl1", "u.goo", "u.nanodlp"}) {
     const RunResult r = run(

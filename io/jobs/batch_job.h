@@ -67,7 +67,8 @@ struct BatchJob {
 // Output extensions accepted for BatchVariant::contours and ::masks (lower case, with the dot).
 inline constexpr std::array<std::string_view, 3> kBatchContourExtensions = {".cli", ".3mf", ".svg"};
 inline constexpr std::array<std::string_view, 1> kTableExtensions = {".topo"};
-inline constexpr std::array<std::string_view, 3> kBatchMaskExtensions = {".sl1", ".exr", ".vdb"};
+inline constexpr std::array<std::string_view, 6> kBatchMaskExtensions = {".sl1",     ".sl1s", ".goo",
+                                                                         ".nanodlp", ".exr",  ".vdb"};
 
 // Reads and validates a job file; relative paths are resolved against the file's folder (made
 // absolute). Throws InputError("<path>: <what>") when the file cannot be read, and as parseBatchJob
