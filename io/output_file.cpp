@@ -205,8 +205,11 @@ namespace {
 // Removes the files of a staged folder (it holds nothing else), then the folder, with system calls only
 // (open, getdents64, unlinkat, close, rmdir): callable from a signal handler.
 void removeFolderFromHandler(const char* path) noexcept {
-  const int fd = ::open(path, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (fd >= 0) {
+  // The job's other threads go on writing layer files into the folder until the process ends: empty it
+  // and remove it again until the removal holds (once it is gone, their next files cannot be created).
+  for (int attempt = 0; attempt < 10000; ++attempt) {
+    const int fd = ::open(path, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (fd < 0) return;  // gone
     alignas(8) char entries[8192];
     for (int pass = 0; pass < 1000; ++pass) {  // from the start again until a pass removes nothing
       bool removed = false;
@@ -225,8 +228,8 @@ void removeFolderFromHandler(const char* path) noexcept {
       if (!removed) break;
     }
     ::close(fd);
+    if (::rmdir(path) == 0 || errno == ENOENT) return;
   }
-  ::rmdir(path);
 }
 
 }  // namespace
