@@ -297,8 +297,11 @@ const Json* fileProfile(const ProfileFile* file, const char* section, const std:
 }
 
 // Applies the named printer or material (from the file, else built in), after what it inherits.
+// `askedWhere`: where the name was given ("--printer", "job.json: settings.printer"), which an unknown
+// name's message starts with; empty for an inherited name (the entry that inherits it names itself).
 void applyProfile(PrintSettings& settings, const ProfileFile* file, SettingOwner owner,
-                  const std::string& name, int depth) {
+                  const std::string& name, int depth, const std::string& askedWhere = {}) {
+  const std::string askedAt = askedWhere.empty() ? std::string() : askedWhere + ": ";
   const char* section = owner == SettingOwner::Printer ? "printers" : "materials";
   const char* what = owner == SettingOwner::Printer ? "printer" : "material";
   if (depth > 16) throw InputError(std::string(what) + " '" + name + "': 'inherits' goes round in a circle");
@@ -340,7 +343,7 @@ void applyProfile(PrintSettings& settings, const ProfileFile* file, SettingOwner
       std::string known = printerNames();
       if (file && file->root.contains("printers"))
         for (const auto& [n, v] : file->root["printers"].items()) known += ", " + n;
-      throw InputError("unknown printer '" + printable(name) + "' (known: " + known + ")");
+      throw InputError(askedAt + "unknown printer '" + printable(name) + "' (known: " + known + ")");
     }
     for (const auto& [key, value] : printerPreset(*preset))
       assignSetting(settings, key, value, "printer " + std::string(preset->name));
@@ -357,7 +360,7 @@ void applyProfile(PrintSettings& settings, const ProfileFile* file, SettingOwner
   std::string known = builtInMaterialNames();
   if (file && file->root.contains("materials"))
     for (const auto& [n, v] : file->root["materials"].items()) known += ", " + n;
-  throw InputError("unknown material '" + printable(name) + "' (known: " + known + ")");
+  throw InputError(askedAt + "unknown material '" + printable(name) + "' (known: " + known + ")");
 }
 
 // The file's only entry of a section, if it has exactly one.
@@ -479,27 +482,17 @@ PrintSettings resolvePrintSettings(const ProfileChoice& choice) {
   if (!choice.file.empty()) file = readProfileFile(choice.file);
   const ProfileFile* f = file ? &*file : nullptr;
   PrintSettings settings;
-  // A name that is neither in the file nor built in is reported where it was given.
-  const auto apply = [&](SettingOwner owner, const std::string& name, const std::string& where) {
-    try {
-      applyProfile(settings, f, owner, name, 0);
-    } catch (const InputError& e) {
-      const std::string message = e.what();
-      const bool unknownHere = message.starts_with(
-          std::string(owner == SettingOwner::Printer ? "unknown printer '" : "unknown material '") + name +
-          "'");
-      if (!unknownHere || where.empty()) throw;
-      throw InputError(where + ": " + message);
-    }
-  };
   std::string printer = choice.printer.empty() ? onlyEntry(f, "printers") : choice.printer;
   if (!printer.empty()) {
-    apply(SettingOwner::Printer, printer, choice.printer.empty() ? std::string() : choice.printerWhere);
+    // A name that is neither in the file nor built in is reported where it was given.
+    applyProfile(settings, f, SettingOwner::Printer, printer, 0,
+                 choice.printer.empty() ? std::string() : choice.printerWhere);
     settings.printerName = printer;
   }
   std::string material = choice.material.empty() ? onlyEntry(f, "materials") : choice.material;
   if (material.empty()) material = "default";
-  apply(SettingOwner::Material, material, choice.material.empty() ? std::string() : choice.materialWhere);
+  applyProfile(settings, f, SettingOwner::Material, material, 0,
+               choice.material.empty() ? std::string() : choice.materialWhere);
   settings.materialName = material;
   for (const auto& [key, value] : choice.overrides)
     assignSetting(settings, key, value, choice.overrideOrigin);
