@@ -163,16 +163,11 @@ void scalePart(LoadedPart& part, const PrintSettings& print) {
 std::vector<std::string> fixInsideOutMeshes(const PlateJob& job, const PlatePart& spec, LoadedPart& part) {
   std::vector<std::string> warnings;
   const auto check = [&](FacetSoup& soup, const std::filesystem::path& file, const std::string& what) {
-    if (!(measureSoup(soup.corners).volume < 0)) return;
-    const std::string named = "part '" + spec.name + "': " + file.string() + ": the " + what;
-    if (job.fixOrientation) {
-      flipFacets(soup.corners);
-      warnings.push_back(named + " was inside out (negative volume): flipped (\"fix_orientation\")");
-    } else {
-      warnings.push_back(named + " is inside out (negative volume), so it " +
-                         (what == "mesh" ? "prints nothing" : "counts with the opposite sign") +
-                         "; flip it with \"fix_orientation\": true in the job's settings");
-    }
+    if (std::string w = fixInsideOut(soup, "part '" + spec.name + "': " + file.string() + ": the " + what,
+                                     job.fixOrientation, "\"fix_orientation\": true in the job's settings",
+                                     what == "mesh" ? "prints nothing" : "counts with the opposite sign");
+        !w.empty())
+      warnings.push_back(std::move(w));
   };
   check(part.model, spec.model, "mesh");
   for (std::size_t f = 0; f < part.features.size(); ++f) {

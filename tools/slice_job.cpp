@@ -317,6 +317,15 @@ void flipFacets(std::span<Point3f> corners) {
   for (std::size_t c = 0; c + 2 < corners.size(); c += 3) std::swap(corners[c + 1], corners[c + 2]);
 }
 
+std::string fixInsideOut(FacetSoup& soup, const std::string& named, bool fix, const std::string& option,
+                         const std::string& consequence) {
+  if (!(measureSoup(soup.corners).volume < 0)) return "";
+  if (!fix)
+    return named + " is inside out (negative volume), so it " + consequence + "; flip it with " + option;
+  flipFacets(soup.corners);
+  return named + " was inside out (negative volume): flipped (" + option + ")";
+}
+
 SoupMeasures measureSoup(std::span<const Point3f> corners) {
   constexpr std::size_t kBlock = 32768;  // facets
   const std::size_t facets = corners.size() / 3, blocks = (facets + kBlock - 1) / kBlock;
@@ -687,19 +696,12 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   // An inside-out feature counts with the opposite sign at the winding stage (an add-on would cut the
   // model away, a removal add to it): flipped with --fix-orientation, else a warning naming it.
   for (std::size_t i = 0; i < features.size(); ++i) {
-    if (!(measureSoup(features[i].corners).volume < 0)) continue;
     const std::string role = i < options.add.size() ? "add-on" : "removal";
-    if (options.fixOrientation) {
-      flipFacets(features[i].corners);
-      result.warnings.push_back(featurePaths[i].string() + ": the " + role +
-                                " feature was inside out (negative volume): flipped (" +
-                                options.fixOrientationOption + ")");
-    } else {
-      result.warnings.push_back(
-          featurePaths[i].string() + ": the " + role +
-          " feature is inside out (negative volume), so it counts with the opposite sign; flip it with " +
-          options.fixOrientationOption);
-    }
+    if (std::string w = fixInsideOut(features[i], featurePaths[i].string() + ": the " + role + " feature",
+                                     options.fixOrientation, options.fixOrientationOption,
+                                     "counts with the opposite sign");
+        !w.empty())
+      result.warnings.push_back(std::move(w));
   }
 
   // The topology (weld and adjacency, or the template check) and the outputs' set-up (planes, files,

@@ -87,6 +87,13 @@ SoupMeasures measureSoup(std::span<const Point3f> corners);
 // Turns every facet of a soup over (its second and third corners swapped): an inside-out mesh made right.
 void flipFacets(std::span<Point3f> corners);
 
+// For a soup that is inside out (negative volume), the warning about it, else "". With `fix` the soup is
+// turned right side out ("<named> was inside out (negative volume): flipped (<option>)"); without, it is
+// left ("<named> is inside out (negative volume), so it <consequence>; flip it with <option>").
+// `option` is how the job asks for the fix (--fix-orientation, a job's "fix_orientation").
+std::string fixInsideOut(FacetSoup& soup, const std::string& named, bool fix, const std::string& option,
+                         const std::string& consequence);
+
 // Per-pipeline-slot buffers of the mask stage: the layer's contour sets, the rasterizer's scratch, the
 // mask, and the encoder's scratch (reused from layer to layer).
 struct MaskSlotScratch {
