@@ -11,14 +11,18 @@ namespace toposlice {
 
 namespace number_text_detail {
 template <class Number>
+std::string shortestEitherNotation(Number value) {
+  char text[32];
+  const auto [end, ec] = std::to_chars(text, text + sizeof text, value);
+  return ec == std::errc{} ? std::string(text, end) : std::string("?");
+}
+template <class Number>
 std::string shortest(Number value) {
   char fixed[40];
   if (const auto [end, ec] = std::to_chars(fixed, fixed + sizeof fixed, value, std::chars_format::fixed);
       ec == std::errc{})
     return std::string(fixed, end);
-  char text[32];
-  const auto [end, ec] = std::to_chars(text, text + sizeof text, value);
-  return ec == std::errc{} ? std::string(text, end) : std::string("?");
+  return shortestEitherNotation(value);
 }
 }  // namespace number_text_detail
 
@@ -29,6 +33,15 @@ inline std::string formatNumber(double value) {
 // A mesh coordinate (float) as the file holds it: "6.2", not the double of that float, 6.199999809265137.
 inline std::string formatNumber(float value) {
   return number_text_detail::shortest(value);
+}
+
+// For messages: the shortest text that reads back exactly, in fixed or exponent notation, whichever is
+// shorter ("-5.077714e-17" where a mesh holds that, not 26 characters of zeros).
+inline std::string readableNumber(double value) {
+  return number_text_detail::shortestEitherNotation(value);
+}
+inline std::string readableNumber(float value) {
+  return number_text_detail::shortestEitherNotation(value);
 }
 
 }  // namespace toposlice

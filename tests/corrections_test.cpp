@@ -860,7 +860,11 @@ TEST_F(CorrectionsCli, SettingsReachTheExrLayersHeaders) {
                                                         {"ts:faded_layers", "7"},
                                                         {"ts:initial_exposure_time", "35"},
                                                         {"ts:printer_model", "SL1"},
-                                                        {"ts:gamma_correction", "0"}}) {
+                                                        {"ts:gamma_correction", "0"},
+                                                        // The SL1's portrait display and its mirror are not
+                                                        // applied to a volume: the headers say what is.
+                                                        {"ts:display_orientation", "landscape"},
+                                                        {"ts:display_mirror_x", "0"}}) {
     const auto found = layer.strings.find(key);
     ASSERT_NE(found, layer.strings.end()) << key;
     EXPECT_EQ(found->second, value) << key;
@@ -877,7 +881,8 @@ TEST_F(CorrectionsCli, SettingsReachTheExrLayersHeaders) {
   // gives it one, --resolution another size.
   const RunResult g =
       this->run({"slice", examplePart().string(), "-H", "1", "--printer", "generic-4k", "--pixel", "0.05",
-                 "--resolution", "1000x800", "--masks", path("g.exr").string(), "-q"});
+                 "--resolution", "1000x800", "--masks", path("g.exr").string(), "--mirror-x", "--summary",
+                 path("g.json").string(), "-q"});
   ASSERT_EQ(g.code(), 0) << g.describe();
   const TinyExrLayer gLayer = readExrWithTinyExr(path("g.exr") / exrLayerFileName("example_part", 0, 7));
   ASSERT_EQ(gLayer.error, "");
@@ -885,8 +890,12 @@ TEST_F(CorrectionsCli, SettingsReachTheExrLayersHeaders) {
        std::vector<std::pair<std::string, std::string>>{{"ts:display_pixels_x", "1000"},
                                                         {"ts:display_pixels_y", "800"},
                                                         {"ts:display_width", "50"},
-                                                        {"ts:display_height", "40"}})
+                                                        {"ts:display_height", "40"},
+                                                        {"ts:display_mirror_x", "1"},  // --mirror-x
+                                                        {"ts:display_mirror_y", "0"}})
     EXPECT_EQ(gLayer.strings.count(key) ? gLayer.strings.at(key) : "none", value) << key;
+  const std::string summary = readBytes(path("g.json"));
+  EXPECT_NE(summary.find("\"display_mirror_x\": \"1\""), std::string::npos) << summary;
 }
 
 // The same settings in a VDB file's metadata, as Debian's vdb_print (OpenVDB's own tool) lists them.

@@ -566,6 +566,30 @@ TEST_F(EmptyResults, PlanesBelowTheModelAreAWarningEvenWhenQuiet) {
   EXPECT_TRUE(fs::exists(path("b.cli")));
 }
 
+// A vertex on a plane counts as above it (DESIGN.md): a plane at the model's top cuts its top face's
+// outline, one at its bottom cuts nothing. The warning and the refusal count planes as the slicer cuts.
+TEST_F(EmptyResults, APlaneAtTheTopCutsTheModelAndOneAtTheBottomDoesNot) {
+  writeBytes(path("box.stl"), boxStl(2, 3, false));  // z 3 .. 5
+  const RunResult top = run({"slice", "box.stl", "--z", "5", "-o", "t.cli", "-q"});
+  ASSERT_EQ(top.code(), 0) << top.describe();
+  EXPECT_EQ(top.err, "");
+  EXPECT_TRUE(contains(readBytes(path("t.cli")), "$$POLYLINE/")) << readBytes(path("t.cli"));
+  const RunResult both = run({"slice", "box.stl", "--z", "3,4,5", "-o", "b.cli", "-q"});
+  ASSERT_EQ(both.code(), 0) << both.describe();
+  EXPECT_TRUE(contains(both.err, "1 of 3 layers lie outside")) << both.err;
+  const RunResult bottom = run({"slice", "box.stl", "--z", "3", "-o", "u.cli", "-q"});
+  expectOneErrorLine(bottom);
+  EXPECT_TRUE(contains(bottom.err, "no plane cuts the model")) << bottom.err;
+}
+
+// Messages print a mesh's coordinates readably: the exponent form where the fixed one is long.
+TEST_F(EmptyResults, TinyCoordinatesReadInMessages) {
+  writeBytes(path("box.stl"), boxStl(2, -5.077714e-17, false));
+  const RunResult r = run({"slice", "box.stl", "--z", "7,8", "-o", "b.cli", "-q"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "the model spans z -5.077714e-17 .. 2 mm")) << r.err;
+}
+
 TEST_F(EmptyResults, NoOutputSaysNothingWasWritten) {
   const RunResult r = run({"slice", examplePart().string(), "-q"});
   ASSERT_EQ(r.code(), 0) << r.describe();
@@ -705,14 +729,20 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
       {"--masks", "m.sl1", "--lift-speed", "10", "--printer", "sl1"},
       {"--masks", "m.nanodlp", "--printer-model", "XYZ", "--printer", "sl1"},
       {"--masks", "m.nanodlp", "--light-pwm", "100", "--printer", "sl1"},
+      // The density only makes the resin mass of the summary and of the files that record it.
+      {"-o", "a.cli", "--material-density", "1.5"},
+      {"--masks", "m.sl1", "--material-density", "1.5", "--printer", "sl1"},
+      // Named as given: the option's own name, or --set KEY.
+      {"-o", "a.cli", "--elefant-foot-layers", "3"},
+      {"--masks", "m.sl1", "--set", "light_pwm=3", "--printer", "sl1"},
   };
   for (const auto& args : cases) {
     std::vector<std::string> all{"slice", examplePart().string()};
     all.insert(all.end(), args.begin(), args.end());
     const RunResult r = run(all);
     expectOneErrorLine(r);
-    EXPECT_TRUE(contains(r.err, args[2])) << r.err;
-    EXPECT_TRUE(contains(r.err, "does nothing")) << r.err;
+    const std::string named = args[2] == "--set" ? "--set " + args[3].substr(0, args[3].find('=')) : args[2];
+    EXPECT_TRUE(contains(r.err, named + " does nothing")) << r.err;
   }
   EXPECT_TRUE(entries(dir_).empty());
 }

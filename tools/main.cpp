@@ -687,15 +687,24 @@ int run(int argc, char** argv) {
     }
     ProfileChoice choice{profilePath,    options.masks.printer, material,    {},
                          "command line", "--printer",           "--material"};
-    for (std::size_t i = 0; i < keys.size(); ++i)
-      if (slice->count(keyOptions[i]) > 0) choice.overrides.emplace_back(keys[i].name, keyValues[i]);
+    std::vector<std::string>
+        givenAs;  // each override as the user typed it: "--exposure-time", "--set exposure_time"
+    for (std::size_t i = 0; i < keys.size(); ++i) {
+      if (slice->count(keyOptions[i]) == 0) continue;
+      choice.overrides.emplace_back(keys[i].name, keyValues[i]);
+      givenAs.push_back("--" + dashed(std::string(keys[i].name)));
+    }
     for (const std::string& assignment : setAssignments) {
       const std::size_t eq = assignment.find('=');
       if (eq == std::string::npos || eq == 0)
         throw InputError("--set '" + assignment + "': expected KEY=VALUE, e.g. exposure_time=6");
       choice.overrides.emplace_back(assignment.substr(0, eq), assignment.substr(eq + 1));
+      givenAs.push_back("--set " + assignment.substr(0, eq));
     }
     options.print = resolvePrintSettings(choice);
+    // --mirror-x/-y mirror the display on top of the printer's own mirroring: recorded as its setting.
+    applyJobMirror(options.print, options.masks.mirrorX ? std::optional<bool>(true) : std::nullopt,
+                   options.masks.mirrorY ? std::optional<bool>(true) : std::nullopt, "command line");
     const PrintSettings& print = options.print;
     needs(slice->count("--printer") > 0,
           masks || print.scales() || print.absoluteCorrection != 0 || print.elefantFootCompensation > 0,
@@ -704,12 +713,19 @@ int run(int argc, char** argv) {
     const std::vector<std::filesystem::path> maskOutputs =
         masks ? std::vector<std::filesystem::path>{options.masks.output}
               : std::vector<std::filesystem::path>{};
-    for (const auto& [key, value] : choice.overrides) {
-      const std::string k = key;
+    for (std::size_t i = 0; i < choice.overrides.size(); ++i) {
+      const std::string& k = choice.overrides[i].first;
       if (const std::string why = settingUnusedReason(k, maskOutputs, "mask output (--masks)"); !why.empty())
-        throw InputError("--" + dashed(k) + " does nothing in this job: " + why);
+        throw InputError(givenAs[i] + " does nothing in this job: " + why);
       needs(k.starts_with("elefant_foot_") && k != "elefant_foot_compensation",
-            options.print.elefantFootCompensation > 0, ("--" + k).c_str(), "elefant_foot_compensation > 0");
+            options.print.elefantFootCompensation > 0, givenAs[i].c_str(), "elefant_foot_compensation > 0");
+      // The density only turns the resin volume into a mass: in the summary and the files that record it.
+      const std::string maskExt = masks ? lowerExtension(options.masks.output) : std::string();
+      if (k == "material_density" && options.summary.empty() && maskExt != ".goo" && maskExt != ".exr" &&
+          maskExt != ".vdb")
+        throw InputError(givenAs[i] +
+                         " does nothing in this job: it gives the resin mass of --summary and of .goo, .exr "
+                         "and .vdb masks");
     }
     options.rebuildOnMismatch = onMismatch == "rebuild";
     options.templateFile = templatePath;

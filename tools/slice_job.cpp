@@ -184,9 +184,10 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
                      " bytes, and a GOO header holds a printer name of 31 at most");
   const bool landscapeOnly = ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
   const bool portraitIgnored = print.orientation == "portrait" && landscapeOnly;
-  job.grid =
-      placeGrid(extent, width, height, pixel, o.origin, o.mirrorX || (!portraitIgnored && print.mirrorX),
-                o.mirrorY || (!portraitIgnored && print.mirrorY));
+  // --mirror-x/-y mirror on top of the printer's own mirroring (in PrusaSlicer's sense of the setting).
+  const bool mirrorX = o.mirrorX || (!portraitIgnored && print.mirrorX);
+  const bool mirrorY = o.mirrorY || (!portraitIgnored && print.mirrorY);
+  job.grid = placeGrid(extent, width, height, pixel, o.origin, mirrorX, mirrorY);
   const double overhang = gridOverhang(extent, job.grid);
   if (overhang > 0 && !o.crop) {
     // Which edges the model crosses, and by how much, in the model's coordinates.
@@ -245,6 +246,10 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   const auto nanometres = [](double mm) { return std::round(mm * 1e6) / 1e6; };
   for (auto& [key, value] : job.settings) {
     if (key == "gamma_correction" && value.empty()) value = job.antiAliased ? "1" : "0";  // as chosen
+    // The mirroring and orientation applied, not only the printer's: what the files' readers are told.
+    if (key == "display_mirror_x") value = mirrorX ? "1" : "0";
+    if (key == "display_mirror_y") value = mirrorY ? "1" : "0";
+    if (key == "display_orientation" && portraitIgnored) value = "landscape";
     if (key == "display_pixels_x") value = std::to_string(width);
     if (key == "display_pixels_y") value = std::to_string(height);
     if (key == "display_width") value = formatNumber(nanometres(width * pixel));
@@ -516,11 +521,13 @@ static void checkPlanesCutModel(const std::filesystem::path& model, const std::v
     zmax = std::max(zmax, b.max.z);
   }
   std::size_t outside = 0;
-  for (const double z : planes) outside += z <= zmin || z >= zmax ? 1 : 0;
+  // A vertex on a plane counts as above it (DESIGN.md): a plane at the bottom cuts nothing, one at the
+  // top cuts the facets that rise to it (the top face's outline).
+  for (const double z : planes) outside += z <= zmin || z > zmax ? 1 : 0;
   char span[160];
   std::snprintf(span, sizeof span, "planes at z %s .. %s mm, the model spans z %s .. %s mm",
-                formatNumber(planes.front()).c_str(), formatNumber(planes.back()).c_str(),
-                formatNumber(zmin).c_str(), formatNumber(zmax).c_str());
+                readableNumber(planes.front()).c_str(), readableNumber(planes.back()).c_str(),
+                readableNumber(zmin).c_str(), readableNumber(zmax).c_str());
   if (outside == planes.size())
     throw InputError(model.string() + ": no plane cuts the model (" + span + "): nothing to slice");
   // The default planes (z0 at the model's bottom, ceil(height / h) layers) may end half a layer above the
