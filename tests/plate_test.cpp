@@ -656,6 +656,25 @@ TEST_F(PlateTest, SettingsThatCannotApplyAreRefused) {
   }
 }
 
+// outputs.masks as slice --masks takes it: a mask format, or a name without an extension for a folder
+// of PNGs. "m.png" made a folder of that name without a word.
+TEST_F(PlateTest, MasksOfAnUnknownFormatAreRefused) {
+  const std::string part =
+      "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  for (const char* name : {"m.png", "m.jpg", "m.zip"}) {
+    try {
+      runPlateJob(job("{\"printer\": \"sl1\", \"parts\": [" + part +
+                      "], \"settings\": {\"layer_height\": 1}, \"outputs\": {\"masks\": \"" + name + "\"}}"),
+                  nullptr);
+      ADD_FAILURE() << "accepted: " << name;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("outputs.masks: unknown mask format"), std::string::npos)
+          << e.what();
+    }
+    EXPECT_FALSE(fs::exists(dir_ / name)) << name;
+  }
+}
+
 TEST_F(PlateTest, ExistingOutputsAreRefusedBeforeTheSlicing) {
   tool_test::writeBytes(dir_ / "r.json", "{\"kept\": 1}\n");
   const std::string missing =

@@ -1,5 +1,6 @@
 #include "io/jobs/plate_job_file.h"
 
+#include "io/jobs/batch_job.h"  // kBatchMaskExtensions: every mask format but the PNG folder
 #include "io/jobs/json_reader.h"
 #include "io/jobs/profile.h"
 
@@ -181,7 +182,11 @@ class PlateParser : public JsonReader {
     const std::string at = "outputs";
     checkKeys(v, at, {"masks", "contours", "report", "picture"});
     const auto key = [&](std::string_view k) { return childPath(at, k); };
-    if (const Json* x = find(v, "masks")) job_.masks = output(*x, key("masks"));
+    // A mask format, or a name without an extension: a folder of PNGs (as slice --masks).
+    if (const Json* x = find(v, "masks"))
+      job_.masks = path(*x, key("masks")).has_extension()
+                       ? output(*x, key("masks"), kBatchMaskExtensions, "mask")
+                       : output(*x, key("masks"));
     if (const Json* x = find(v, "contours")) {
       if (!x->is_array()) wrongType(*x, key("contours"), "an array of paths");
       for (std::size_t i = 0; i < x->size(); ++i)
