@@ -20,6 +20,7 @@
 #include "io/readers/stl_writer.h"
 #include "parallel/parallel.h"
 #include "tests/fixtures/runners.h"
+#include "tests/fixtures/shapes.h"
 #include "tests/tool_runner.h"
 #include "tools/plate_job.h"
 #include "tools/slice_job.h"
@@ -263,6 +264,34 @@ TEST(ArrangeTest, SplitFootprintsOfSeveralListsEqualTheJoinedOneOnOneThread) {
   }
 }
 
+// The distance between two parts' projections, against boxes and a turned square whose distances are
+// known: apart along an axis, across a diagonal, a corner towards an edge, touching, overlapping, and
+// farther than the limit.
+TEST(ArrangeTest, ProjectionDistanceOfBoxes) {
+  const FacetSoup a = fixtures::box(0, 0, 0, 10, 5, 3), b = fixtures::box(0, 0, 0, 8, 5, 2);
+  const auto distance = [](const FacetSoup& p, double px, double py, const FacetSoup& q, double qx, double qy,
+                           double limit) {
+    const std::span<const Point3f> lp[1] = {p.corners}, lq[1] = {q.corners};
+    return projectionDistance(lp, px, py, lq, qx, qy, limit);
+  };
+  EXPECT_NEAR(distance(a, 0, 0, b, 12, 0, 5), 2.0, 1e-12);
+  EXPECT_NEAR(distance(b, 12, 0, a, 0, 0, 5), 2.0, 1e-12);
+  EXPECT_NEAR(distance(a, 0, 0, b, 13, 9, 10), 5.0, 1e-12);  // corner (10, 5) to corner (13, 9)
+  EXPECT_EQ(distance(a, 0, 0, b, 10, 0, 5), 0.0);            // sharing an edge
+  EXPECT_EQ(distance(a, 0, 0, b, 4, 1, 5), 0.0);             // overlapping
+  EXPECT_EQ(distance(a, 0, 0, b, 30, 0, 5), 5.0);            // beyond the limit: the limit
+  // A square of side 2 turned by 45 degrees: its left corner sqrt(2) left of its centre.
+  FacetSoup diamond = fixtures::box(-1, -1, 0, 1, 1, 1);
+  for (Point3f& p : diamond.corners) {
+    const double x = p.x, y = p.y, r = std::sqrt(0.5);
+    p.x = static_cast<float>(r * (x - y));
+    p.y = static_cast<float>(r * (x + y));
+  }
+  EXPECT_NEAR(distance(a, 0, 0, diamond, 10 + 1.5 + std::sqrt(2.0), 2.5, 5), 1.5, 1e-6);
+  // A small square inside a larger one (no edges meet): overlapping all the same.
+  EXPECT_EQ(distance(fixtures::box(0, 0, 0, 20, 20, 1), 0, 0, diamond, 10, 10, 5), 0.0);
+}
+
 // No two footprints, each grown by half the spacing, overlap, all lie inside the margin, the result repeats,
 // and it needs no more plates and packs no less densely than shelf packing of bounding boxes.
 TEST(ArrangeTest, AlignersNestBetterThanShelves) {
@@ -407,6 +436,31 @@ TEST_F(PlateTest, ProblemsWithGivenPlacementsNameTheParts) {
     EXPECT_NE(what.find("part 'left' is 10.886 mm tall, 2.886 mm taller"), std::string::npos) << what;
   }
   EXPECT_FALSE(fs::exists(dir_ / "r.json"));
+}
+
+// Given placements are measured on the parts' facets: 2.4 mm apart with a spacing of 2 is fine (the
+// cell covers, conservative by a few cells, refused it), 1.6 mm apart is refused with the distance.
+TEST_F(PlateTest, GivenPlacementsAreMeasuredOnTheParts) {
+  writeBinaryStl(dir_ / "a.stl", fixtures::box(0, 0, 0, 10, 5, 3), "box", false);
+  const auto text = [&](double gap) {
+    return "{\"settings\": {\"layer_height\": 1, \"pixel\": 0.05, \"resolution\": [2000, 1000]}, "
+           "\"arrange\": {\"spacing\": 2}, \"parts\": [{\"name\": \"a\", \"model\": \"a.stl\", "
+           "\"placement\": {\"x\": 20, \"y\": 20}}, {\"name\": \"b\", \"model\": \"a.stl\", "
+           "\"placement\": {\"x\": " +
+           std::to_string(30 + gap) + ", \"y\": 20}}], \"outputs\": {\"contours\": [\"p.cli\"]}}";
+  };
+  EXPECT_NO_THROW(runPlateJob(job(text(2.4)), nullptr));
+  fs::remove(dir_ / "p.cli");
+  try {
+    runPlateJob(job(text(1.6)), nullptr);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find(
+                  "parts 'a' and 'b' are 1.600 mm apart, closer than the spacing of 2.000 mm"),
+              std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "p.cli"));
 }
 
 TEST_F(PlateTest, OtherConnectivityIsRefusedByNameUnlessRebuildIsAllowed) {

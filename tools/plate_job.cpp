@@ -499,13 +499,25 @@ void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
     fixed.push_back(p);
     grown.push_back(placeFootprint(loaded[p].footprint, r.placement.rotation, r.tx, r.ty, 0.5 * spacing));
   }
+  // The cell covers are conservative (by up to a few cells): a pair whose covers meet is measured on
+  // its facets, turned and scaled as they print (so against the job's own spacing).
+  const auto projected = [&](std::size_t p) {
+    std::vector<std::span<const Point3f>> lists = {loaded[p].model.corners};
+    for (std::size_t f = 0; f < job.parts[p].add.size(); ++f) lists.push_back(loaded[p].features[f].corners);
+    return lists;
+  };
   for (std::size_t a = 0; a < fixed.size(); ++a)
-    for (std::size_t b = a + 1; b < fixed.size(); ++b)
-      if (shapesOverlap(grown[a], grown[b]))
-        problems.push_back(
-            "parts '" + results[fixed[a]].name + "' and '" + results[fixed[b]].name +
-            "' overlap or are closer than the spacing of " + mm(spacing) +
-            (spacing > job.spacing ? " (the job's, and room for the scaling correction)" : ""));
+    for (std::size_t b = a + 1; b < fixed.size(); ++b) {
+      if (!shapesOverlap(grown[a], grown[b])) continue;
+      const PlatePartResult &ra = results[fixed[a]], &rb = results[fixed[b]];
+      const double distance = projectionDistance(projected(fixed[a]), ra.tx, ra.ty, projected(fixed[b]),
+                                                 rb.tx, rb.ty, job.spacing);
+      if (distance >= job.spacing * (1 - 1e-9)) continue;
+      problems.push_back(
+          "parts '" + ra.name + "' and '" + rb.name + "' " +
+          (distance > 0 ? "are " + mm(distance) + " apart, closer than the spacing of " + mm(job.spacing)
+                        : std::string("overlap")));
+    }
   if (!problems.empty()) throwProblems(job, "the plate cannot be printed as given", problems);
 }
 

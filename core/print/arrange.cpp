@@ -1,8 +1,10 @@
 #include "core/print/arrange.h"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <tuple>
@@ -56,6 +58,76 @@ bool slabRange(const Point2d* t, double y0, double y1, double& xmin, double& xma
     }
   }
   return xmin <= xmax;
+}
+
+// ---- Distances between projected facets ----
+
+struct Triangle2 {
+  Point2d p[3];
+  double x0, y0, x1, y1;  // bounding box
+};
+
+double cross(const Point2d& o, const Point2d& a, const Point2d& b) {
+  return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+}
+
+double pointSegmentDistance(const Point2d& p, const Point2d& a, const Point2d& b) {
+  const double dx = b.x - a.x, dy = b.y - a.y, length2 = dx * dx + dy * dy;
+  double t = length2 > 0 ? ((p.x - a.x) * dx + (p.y - a.y) * dy) / length2 : 0.0;
+  t = std::clamp(t, 0.0, 1.0);
+  return std::hypot(p.x - (a.x + t * dx), p.y - (a.y + t * dy));
+}
+
+// Whether closed segments ab and cd share a point.
+bool segmentsMeet(const Point2d& a, const Point2d& b, const Point2d& c, const Point2d& d) {
+  const double d1 = cross(c, d, a), d2 = cross(c, d, b), d3 = cross(a, b, c), d4 = cross(a, b, d);
+  if (((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0))) return true;
+  // Touching or collinear: some end lies on the other segment.
+  return pointSegmentDistance(a, c, d) == 0 || pointSegmentDistance(b, c, d) == 0 ||
+         pointSegmentDistance(c, a, b) == 0 || pointSegmentDistance(d, a, b) == 0;
+}
+
+// Inside or on a triangle of either orientation (a degenerate one contains nothing: its edges decide).
+bool insideTriangle(const Point2d& p, const Triangle2& t) {
+  const double c0 = cross(t.p[0], t.p[1], p), c1 = cross(t.p[1], t.p[2], p), c2 = cross(t.p[2], t.p[0], p);
+  return (c0 >= 0 && c1 >= 0 && c2 >= 0 && (c0 > 0 || c1 > 0 || c2 > 0)) ||
+         (c0 <= 0 && c1 <= 0 && c2 <= 0 && (c0 < 0 || c1 < 0 || c2 < 0));
+}
+
+double triangleDistance(const Triangle2& s, const Triangle2& t) {
+  double best = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const Point2d &a = s.p[i], &b = s.p[(i + 1) % 3], &c = t.p[k], &d = t.p[(k + 1) % 3];
+      if (segmentsMeet(a, b, c, d)) return 0;
+      best = std::min({best, pointSegmentDistance(a, c, d), pointSegmentDistance(b, c, d),
+                       pointSegmentDistance(c, a, b), pointSegmentDistance(d, a, b)});
+    }
+  if (insideTriangle(s.p[0], t) || insideTriangle(t.p[0], s)) return 0;
+  return best;
+}
+
+// The projected facets of `lists` moved by (dx, dy) whose boxes come within `reach` of `box` (x0, y0,
+// x1, y1); and the box of all of them when `box` is null.
+std::vector<Triangle2> projectedTriangles(std::span<const std::span<const Point3f>> lists, double dx,
+                                          double dy, const double* box, double reach) {
+  std::vector<Triangle2> out;
+  for (const auto& corners : lists)
+    for (std::size_t f = 0; f + 2 < corners.size(); f += 3) {
+      Triangle2 t;
+      for (int c = 0; c < 3; ++c) t.p[c] = {corners[f + c].x + dx, corners[f + c].y + dy};
+      t.x0 = std::min({t.p[0].x, t.p[1].x, t.p[2].x});
+      t.x1 = std::max({t.p[0].x, t.p[1].x, t.p[2].x});
+      t.y0 = std::min({t.p[0].y, t.p[1].y, t.p[2].y});
+      t.y1 = std::max({t.p[0].y, t.p[1].y, t.p[2].y});
+      if (!(std::isfinite(t.x0) && std::isfinite(t.x1) && std::isfinite(t.y0) && std::isfinite(t.y1)))
+        continue;
+      if (box &&
+          (t.x0 > box[2] + reach || t.x1 < box[0] - reach || t.y0 > box[3] + reach || t.y1 < box[1] - reach))
+        continue;
+      out.push_back(t);
+    }
+  return out;
 }
 
 }  // namespace
@@ -440,6 +512,83 @@ Arrangement shelfPackBoxes(std::span<const ArrangeItem> items, const ArrangeSett
   }
   result.plates = static_cast<uint32_t>(plateTop.size());
   return result;
+}
+
+double projectionDistance(std::span<const std::span<const Point3f>> a, double ax, double ay,
+                          std::span<const std::span<const Point3f>> b, double bx, double by, double limit) {
+  const auto boxOf = [](std::span<const std::span<const Point3f>> lists, double dx, double dy) {
+    std::array<double, 4> box{
+        std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+        -std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+    for (const auto& corners : lists)
+      for (const Point3f& p : corners) {
+        if (!(std::isfinite(p.x) && std::isfinite(p.y))) continue;
+        box = {std::min(box[0], p.x + dx), std::min(box[1], p.y + dy), std::max(box[2], p.x + dx),
+               std::max(box[3], p.y + dy)};
+      }
+    return box;
+  };
+  const std::array<double, 4> boxA = boxOf(a, ax, ay), boxB = boxOf(b, bx, by);
+  // Only facets near the other part can be nearer than `limit`.
+  const std::vector<Triangle2> near = projectedTriangles(a, ax, ay, boxB.data(), limit);
+  const std::vector<Triangle2> other = projectedTriangles(b, bx, by, boxA.data(), limit);
+  double best = limit;
+  if (near.empty() || other.empty()) return best;
+  // `other` in buckets of a grid (about one facet per bucket on average, at least `limit` wide).
+  double x0 = other[0].x0, y0 = other[0].y0, x1 = other[0].x1, y1 = other[0].y1;
+  for (const Triangle2& t : other) {
+    x0 = std::min(x0, t.x0), y0 = std::min(y0, t.y0), x1 = std::max(x1, t.x1), y1 = std::max(y1, t.y1);
+  }
+  const double extent = std::max({x1 - x0, y1 - y0, 1e-9});
+  const double cell = std::max(limit, extent / std::max(1.0, std::ceil(std::sqrt(double(other.size())))));
+  const auto columns = static_cast<int64_t>(std::floor((x1 - x0) / cell)) + 1;
+  const auto rows = static_cast<int64_t>(std::floor((y1 - y0) / cell)) + 1;
+  const auto column = [&](double x) {
+    return std::clamp<int64_t>(static_cast<int64_t>(std::floor((x - x0) / cell)), 0, columns - 1);
+  };
+  const auto row = [&](double y) {
+    return std::clamp<int64_t>(static_cast<int64_t>(std::floor((y - y0) / cell)), 0, rows - 1);
+  };
+  std::vector<uint32_t> start(static_cast<std::size_t>(columns * rows) + 1, 0), items;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (uint32_t k = 0; k < other.size(); ++k) {
+      const Triangle2& t = other[k];
+      for (int64_t j = row(t.y0); j <= row(t.y1); ++j)
+        for (int64_t i = column(t.x0); i <= column(t.x1); ++i) {
+          const auto bucket = static_cast<std::size_t>(j * columns + i);
+          if (pass == 0)
+            ++start[bucket + 1];
+          else
+            items[start[bucket]++] = k;
+        }
+    }
+    if (pass == 0) {
+      std::partial_sum(start.begin(), start.end(), start.begin());
+      items.resize(start.back());
+    } else {  // start[b] moved to the end of bucket b: shift back
+      for (std::size_t bucket = start.size() - 1; bucket > 0; --bucket) start[bucket] = start[bucket - 1];
+      start[0] = 0;
+    }
+  }
+  std::vector<uint32_t> seen(other.size(), std::numeric_limits<uint32_t>::max());
+  for (uint32_t n = 0; n < near.size(); ++n) {
+    const Triangle2& s = near[n];
+    if (s.x0 > x1 + best || s.x1 < x0 - best || s.y0 > y1 + best || s.y1 < y0 - best) continue;
+    for (int64_t j = row(s.y0 - best); j <= row(s.y1 + best); ++j)
+      for (int64_t i = column(s.x0 - best); i <= column(s.x1 + best); ++i) {
+        const auto bucket = static_cast<std::size_t>(j * columns + i);
+        for (uint32_t e = start[bucket]; e < start[bucket + 1]; ++e) {
+          const uint32_t k = items[e];
+          if (seen[k] == n) continue;
+          seen[k] = n;
+          const Triangle2& t = other[k];
+          if (t.x0 > s.x1 + best || t.x1 < s.x0 - best || t.y0 > s.y1 + best || t.y1 < s.y0 - best) continue;
+          best = std::min(best, triangleDistance(s, t));
+          if (best == 0) return 0;
+        }
+      }
+  }
+  return best;
 }
 
 }  // namespace toposlice

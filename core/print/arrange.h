@@ -67,6 +67,15 @@ CellShape shiftShape(CellShape shape, int32_t di, int32_t dj);
 // True when the two shapes share a cell.
 bool shapesOverlap(const CellShape& a, const CellShape& b);
 
+// The distance in the plate's xy plane between the projections of two parts, each given as lists of
+// corners (3 per facet) moved by (ax, ay) and (bx, by) mm: the smallest distance between a projected
+// facet of one and one of the other, 0 where they overlap or touch (exact up to floating-point
+// rounding). Only facets closer than `limit` mm to the other part's bounding box are compared: returns
+// min(distance, limit). For given placements, whose cell covers (placeFootprint) are conservative by
+// up to a few cells.
+double projectionDistance(std::span<const std::span<const Point3f>> a, double ax, double ay,
+                          std::span<const std::span<const Point3f>> b, double bx, double by, double limit);
+
 struct ArrangeSettings {
   double plateWidth = 0, plateHeight = 0;  // mm, the printable area from (0, 0)
   double margin = 0;                       // mm kept free along every edge
