@@ -704,13 +704,31 @@ TEST(ElephantFoot, FadesLinearlyOverItsLayers) {
   EXPECT_DOUBLE_EQ(elephantFootAt(8, 0.2, 10), 0.2 / 9);
 }
 
+// The gamma applies to the exact coverage: round(255 a^gamma) for any a, not to a rounded to 8 bits
+// first (a pixel 0.000655 covered was 0 at every gamma; at 0.45 it is 9).
 TEST(MaskCorrections, GammaAndLightMap) {
-  const auto identity = gammaTable(1.0);
-  for (int v = 0; v < 256; ++v) EXPECT_EQ(identity[static_cast<std::size_t>(v)], v);
-  const auto g = gammaTable(2.0);
-  EXPECT_EQ(g[0], 0);
-  EXPECT_EQ(g[255], 255);
-  EXPECT_EQ(g[128], 64);  // 255 * (128/255)^2 = 64.25
+  std::mt19937_64 random(7);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (const double gamma : {1.0, 2.0, 0.45, 2.2, 0.8}) {
+    const CoverageCurve curve = gammaCurve(gamma);
+    EXPECT_EQ(curve.value(0), 0);
+    EXPECT_EQ(curve.value(-1e-12), 0);
+    EXPECT_EQ(curve.value(1), 255);
+    EXPECT_EQ(curve.value(1 + 1e-12), 255);
+    for (int k = 0; k < 20000; ++k) {
+      // Uniform, and many near 0 where a gamma under 1 is steep.
+      const double a = k % 2 == 0 ? unit(random) : std::pow(unit(random), 8.0);
+      const double exact = 255.0 * std::pow(a, gamma) + 0.5;
+      const int v = curve.value(a);
+      // Exact away from ties (a rounding step of pow may move a value sitting on a half).
+      if (std::abs(exact - std::round(exact)) > 1e-9) {
+        ASSERT_EQ(v, static_cast<int>(std::floor(exact))) << "gamma " << gamma << ", a " << a;
+      }
+    }
+  }
+  EXPECT_EQ(gammaCurve(0.45).value(0.000655), 9);     // 255 * 0.000655^0.45 = 9.41
+  EXPECT_EQ(gammaCurve(2.0).value(128 / 255.0), 64);  // 255 * (128/255)^2 = 64.25
+  EXPECT_EQ(gammaCurve(2.2).value(0.02), 0);          // 255 * 0.02^2.2 = 0.047
   EXPECT_EQ(lightValue(255, 128), 128);
   EXPECT_EQ(lightValue(128, 255), 128);
 }

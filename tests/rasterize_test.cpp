@@ -1045,9 +1045,9 @@ TEST(RasterCoverage, CoincidentRemovalEdgesCancelExactly) {
   }
 }
 
-// The transfer table is applied as values are written (here a threshold at 128), the row hook on each
-// lit row's span; extents and the value sum follow what they leave.
-TEST(RasterCoverage, TransferTableAndRowHook) {
+// The transfer curve is applied as values are written (here a threshold at half coverage), the row hook
+// on each lit row's span; extents follow what they leave, the value sum is the area before the curve.
+TEST(RasterCoverage, TransferCurveAndRowHook) {
   const LayerContours layer = makeLayer({circle(3.2, 2.9, 2.1, 300)});
   const std::vector<ContourSet> sets = {{&layer, 1}};
   PixelGrid grid = makeGrid(0, 0, 0.1, 70, 60);
@@ -1055,8 +1055,12 @@ TEST(RasterCoverage, TransferTableAndRowHook) {
   const MaskImage plain = coverage(sets, grid);
   uint8_t threshold[256];
   for (int v = 0; v < 256; ++v) threshold[v] = v >= 128 ? 255 : 0;
+  // round(255 a) >= 128 where a >= 127.5 / 255: a curve of one step there.
+  std::array<double, 256> steps;
+  steps.fill(127.5 / 255.0);
+  const CoverageCurve curve = coverageCurve(steps);
   CoverageTransfer transfer;
-  transfer.table = threshold;
+  transfer.curve = &curve;
   RasterScratch scratch;
   MaskImage m;
   uint64_t sum = 0;
@@ -1064,11 +1068,11 @@ TEST(RasterCoverage, TransferTableAndRowHook) {
   uint64_t expectedSum = 0;
   for (std::size_t p = 0; p < m.pixels.size(); ++p) {
     ASSERT_EQ(m.pixels[p], threshold[plain.pixels[p]]) << p;
-    expectedSum += m.pixels[p];
+    expectedSum += plain.pixels[p];  // the area, before the curve
   }
   EXPECT_EQ(sum, expectedSum);
   // A hook that darkens the first lit pixel of every row: the extent starts one later (or further).
-  transfer.table = nullptr;
+  transfer.curve = nullptr;
   transfer.row = [](void* context, uint32_t, uint32_t begin, uint32_t, uint8_t* row) {
     ++*static_cast<int*>(context);
     row[begin] = 0;
@@ -1113,7 +1117,7 @@ void expectFillsDescribePixels(const MaskImage& m) {
 }
 
 // A light map applied as the values are written equals the map applied to every pixel of the finished
-// image, round(v * m / 255), with a gamma table, mirrored or not, on a reused image: the same pixels, tight
+// image, round(v * m / 255), with a gamma curve, mirrored or not, on a reused image: the same pixels, tight
 // extents (pixels dimmed to 0 at a row's ends leave it), the value sum taken before the map, and the
 // stretches of one value (the map's, within the runs between edge pixels) listed as fills. Maps: one
 // that changes at every pixel, and one of stretches (some dark) as a display's smooth map has.
@@ -1121,7 +1125,7 @@ TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
   const LayerContours layer =
       makeLayer({circle(3.2, 2.9, 2.1, 300), reversed(circle(3.0, 3.0, 1.0, 200)), rect(4.6, 0.3, 6.6, 5.5)});
   const std::vector<ContourSet> sets = {{&layer, 1}};
-  const std::array<uint8_t, 256> gamma = gammaTable(0.8);
+  const CoverageCurve gamma = gammaCurve(0.8);
   RasterScratch scratch;
   MaskImage m;
   for (int variant = 0; variant < 4; ++variant) {
@@ -1140,7 +1144,7 @@ TEST(RasterCoverage, LightMapAsTheValuesAreWritten) {
     }
     const LightMap map = lightMapOf(image);
     CoverageTransfer transfer;
-    transfer.table = gamma.data();
+    transfer.curve = &gamma;
     uint64_t before = 0, after = 0;
     rasterizeCoverage(sets, grid, m, scratch, &before, &transfer);
     const MaskImage unlit = m;
@@ -1289,12 +1293,12 @@ TEST(RasterCoverage, ConsecutiveLayersInOneImageEqualFreshImages) {
   // An anti-aliased layer drawn into the image that holds the previous layer (only that layer's lit
   // stretches are cleared, its dark fills skipped). Slowly moving shapes with a hole and a second part
   // that comes and goes (dark stretches between parts), whole layers empty, mirrored and portrait grids,
-  // with a gamma table, a light map or a row hook, and a binary layer or a grid of another size in
+  // with a gamma curve, a light map or a row hook, and a binary layer or a grid of another size in
   // between: every image equals the same layer drawn into a fresh image, with the same extents, fills
   // and value sum.
   RasterScratch scratch;
   MaskImage m;
-  const std::array<uint8_t, 256> gamma = gammaTable(0.8);
+  const CoverageCurve gamma = gammaCurve(0.8);
   constexpr uint32_t kWidth = 126, kHeight = 121;  // every layer's grid, portrait or not
   MaskImage lightImage;                            // a light map of stretches, some of them dark
   lightImage.width = kWidth;
@@ -1312,7 +1316,7 @@ TEST(RasterCoverage, ConsecutiveLayersInOneImageEqualFreshImages) {
     const std::vector<ContourSet> sets = {{&layer, 1}};
     const PixelGrid grid = driftingGrid(k, 0.05, kWidth, kHeight);
     CoverageTransfer transfer;
-    transfer.table = k % 4 == 1 ? gamma.data() : nullptr;
+    transfer.curve = k % 4 == 1 ? &gamma : nullptr;
     transfer.lightMap = k % 4 == 2 ? &map : nullptr;
     if (k % 4 == 3 && k % 3 == 0) {
       transfer.row = [](void*, uint32_t, uint32_t begin, uint32_t end, uint8_t* row) {
@@ -1357,16 +1361,14 @@ TEST(RasterCoverage, ConsecutiveLayersInOneImageEqualFreshImages) {
 
 TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {
   // Anti-aliased images of wiggly outlines and random loops, mirrored or not, reused from layer to
-  // layer, with a gamma table or a light map: their fills hold what the pixels hold, and the PNG and EXR
+  // layer, with a gamma curve or a light map: their fills hold what the pixels hold, and the PNG and EXR
   // coders, which jump over them, write the bytes they write without them. A row hook may change values, so
   // it leaves no fills.
   std::mt19937 rng(4711);
   RasterScratch scratch;
   MaskImage m;
   std::size_t fills = 0;
-  uint8_t gamma[256];
-  for (int v = 0; v < 256; ++v)
-    gamma[v] = static_cast<uint8_t>(std::lround(255.0 * std::pow(v / 255.0, 0.7)));
+  const CoverageCurve gamma = gammaCurve(0.7);
   for (int trial = 0; trial < 40; ++trial) {
     PixelGrid grid = makeGrid(-0.013, 0.021, 0.25, 90, 80);
     grid.mirrorX = trial % 2 == 1;
@@ -1384,7 +1386,7 @@ TEST(RasterCoverage, FillsDescribePixelsAndLeaveThePngAsItWas) {
       image.pixels[p] = static_cast<uint8_t>(150 + (p % grid.width) / 13 + (p / grid.width) % 3);
     const LightMap map = lightMapOf(image);
     CoverageTransfer transfer;
-    transfer.table = gamma;
+    transfer.curve = &gamma;
     transfer.lightMap = trial % 5 == 4 ? &map : nullptr;
     rasterizeCoverage(sets, grid, m, scratch, nullptr,
                       trial % 5 == 2 || trial % 5 == 4 ? &transfer : nullptr);

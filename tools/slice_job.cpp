@@ -281,7 +281,7 @@ MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
 MaskTransfer maskTransfer(const PrintSettings& print, const MaskJob& job) {
   MaskTransfer t;
   t.gamma = job.antiAliased && print.gammaCorrection && *print.gammaCorrection != 1.0;
-  if (t.gamma) t.gammaTable = gammaTable(*print.gammaCorrection);
+  if (t.gamma) t.gammaCurve = gammaCurve(*print.gammaCorrection);
   if (!print.lightMap.empty()) t.lightMap = lightMapOf(readLightMap(print.lightMap, job));
   return t;
 }
@@ -364,12 +364,12 @@ double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, 
                           RasterScratch& scratch, const MaskTransfer* transfer) {
   if (job.antiAliased) {
     // Gamma and the light map are applied as the values are written (no second pass, only lit pixels);
-    // the area is taken after gamma and before the light map, which dims the light, not the part.
+    // the area is taken before them: they change the light, not the part.
     uint64_t valueSum = 0;  // maskArea without a pass over the image
     const bool gamma = transfer != nullptr && transfer->gamma;
     const bool light = transfer != nullptr && !transfer->lightMap.empty();
     CoverageTransfer coverage;
-    coverage.table = gamma ? transfer->gammaTable.data() : nullptr;
+    coverage.curve = gamma ? &transfer->gammaCurve : nullptr;
     coverage.lightMap = light ? &transfer->lightMap : nullptr;
     rasterizeCoverage(sets, job.grid, mask, scratch, &valueSum, gamma || light ? &coverage : nullptr);
     return static_cast<double>(valueSum) / 255.0 * job.grid.pixel * job.grid.pixel;

@@ -60,11 +60,11 @@ void checkMaskSettings(const PrintSettings& print, bool antialias, bool masks, c
 nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre);
 
 // What the settings do to every mask of `job` as it is rasterized (anti-aliased masks only): the gamma
-// table, when gamma_correction is set and not 1, and the light-uniformity map, read from light_map (a
+// curve, when gamma_correction is set and not 1, and the light-uniformity map, read from light_map (a
 // grayscale PNG of the masks' size). Throws InputError naming the light map's file for an unreadable
 // file, another format or another size.
 struct MaskTransfer {
-  std::array<uint8_t, 256> gammaTable{};
+  CoverageCurve gammaCurve;
   bool gamma = false;
   LightMap lightMap;  // empty: none
 };
@@ -104,8 +104,8 @@ struct MaskSlotScratch {
 };
 
 // Rasterizes the sets onto job.grid (binary or anti-aliased as the job says) into `mask`; returns the
-// lit area in mm^2. Anti-aliased only: the transfer's gamma table maps the coverage as it is written, and
-// its light map then multiplies the values (the area is taken before it).
+// solid area in mm^2. Anti-aliased only: the transfer's gamma curve maps the exact coverage as it is
+// written, and its light map then multiplies the values (the area is taken before both).
 double rasterizeLayerSets(std::span<const ContourSet> sets, const MaskJob& job, MaskImage& mask,
                           RasterScratch& scratch, const MaskTransfer* transfer = nullptr);
 

@@ -26,12 +26,12 @@ double elephantFootAt(uint32_t k, double amount, uint32_t layers) {
   return amount * static_cast<double>(n - k) / static_cast<double>(n);
 }
 
-std::array<uint8_t, 256> gammaTable(double gamma) {
-  std::array<uint8_t, 256> table{};
-  for (int v = 0; v < 256; ++v)
-    table[static_cast<std::size_t>(v)] =
-        static_cast<uint8_t>(std::lround(255.0 * std::pow(static_cast<double>(v) / 255.0, gamma)));
-  return table;
+CoverageCurve gammaCurve(double gamma) {
+  // round(255 a^g) >= v exactly where a^g >= (v - 1/2) / 255, i.e. a >= ((v - 1/2) / 255)^(1 / g).
+  std::array<double, 256> thresholds{};
+  for (int v = 1; v < 256; ++v)
+    thresholds[static_cast<std::size_t>(v)] = std::pow((v - 0.5) / 255.0, 1.0 / gamma);
+  return coverageCurve(thresholds);
 }
 
 }  // namespace toposlice

@@ -1,7 +1,7 @@
 // Printer and material corrections that need no polygon library (issue "Production print settings"):
 // the scaling correction of a model, the elephant-foot schedule over the bottom layers and the
-// anti-aliasing gamma's table. Offsets live in offset/polygon_offset.h; the rasterizer applies the gamma
-// table and the light-uniformity map as it writes each value (core/raster/rasterize.h).
+// anti-aliasing gamma's curve. Offsets live in offset/polygon_offset.h; the rasterizer applies the gamma
+// curve and the light-uniformity map as it writes each value (core/raster/rasterize.h).
 #pragma once
 
 #include <array>
@@ -9,6 +9,7 @@
 #include <span>
 
 #include "core/mesh/mesh.h"
+#include "core/raster/rasterize.h"
 
 namespace toposlice {
 
@@ -28,8 +29,9 @@ void scaleCorners(std::span<Point3f> corners, const std::array<double, 3>& facto
 // job's layer count, as PrusaSlicer does.
 double elephantFootAt(uint32_t k, double amount, uint32_t layers);
 
-// Table of the anti-aliasing gamma applied to 8-bit coverage v: round(255 * (v / 255)^gamma); gamma = 1
-// is the identity. gamma > 0 (gamma = 0 means binary masks, which the rasterizer makes directly).
-std::array<uint8_t, 256> gammaTable(double gamma);
+// The anti-aliasing gamma as a coverage curve (core/raster/rasterize.h): a pixel covered by the fraction
+// a gets round(255 a^gamma) (halves up), from the exact coverage. gamma > 0 (gamma = 0 means binary
+// masks, which the rasterizer makes directly); gamma = 1 is round(255 a), as without a curve.
+CoverageCurve gammaCurve(double gamma);
 
 }  // namespace toposlice

@@ -1214,7 +1214,6 @@ void rasterizeBinary(std::span<const ContourSet> sets, const PixelGrid& grid, Ma
 void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, MaskImage& out,
                        RasterScratch& scratch, uint64_t* valueSum, const CoverageTransfer* transfer) {
   assert(usableGrid(grid));
-  assert(transfer == nullptr || transfer->table == nullptr || transfer->table[0] == 0);
   if (valueSum) *valueSum = 0;
   const uint32_t width = grid.width, height = grid.height;
   prepareImage(grid, out);
@@ -1224,12 +1223,11 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
   scratch.cells.assign(static_cast<std::size_t>(width) + 2, 0.0);
   double* cells = scratch.cells.data();
   std::vector<CellSpan>& spans = scratch.spans;
-  const uint8_t* table = transfer ? transfer->table : nullptr;
-  const auto valueOf = [table](double a) {
-    const double scaled = std::clamp(a, 0.0, 1.0) * 255.0 + 0.5;
-    const auto v = static_cast<uint8_t>(scaled);
-    return table ? table[v] : v;
-  };
+  const CoverageCurve* curve = transfer ? transfer->curve : nullptr;
+  const auto rounded = [](double a) { return static_cast<uint8_t>(std::clamp(a, 0.0, 1.0) * 255.0 + 0.5); };
+  const auto valueOf = [curve, rounded](double a) { return curve ? curve->value(a) : rounded(a); };
+  // What a pixel of value v and coverage a adds to valueSum: round(255 a), before the curve.
+  const auto areaOf = [curve, rounded](uint8_t v, double a) { return curve ? rounded(a) : v; };
 
   // Active edges: those overlapping row j, as u at the row's bottom and their index in coverageBucketed,
   // sorted by u (nearly sorted from the row below), so that the chains are too.
@@ -1287,8 +1285,10 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     FillSink sink{rowFills};
     FillSink* fills = keepFills ? &sink : nullptr;  // in the pass's order: reversed below
     // The unmirrored pixels [from, to) at one value before the light map.
-    const auto fill = [&](uint32_t from, uint32_t to, uint8_t value) {
+    const auto fill = [&](uint32_t from, uint32_t to, double a) {
       if (from >= to) return;
+      const uint8_t value = valueOf(a);
+      sum += static_cast<uint64_t>(areaOf(value, a)) * (to - from);
       const uint32_t at = grid.mirrorX ? width - to : from, end = at + (to - from);
       if (value == 0 || !lightRow) {
         putStretch(row, at, end, value, fills);
@@ -1298,7 +1298,6 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       }
       lo = std::min(lo, from);
       hi = to;
-      sum += static_cast<uint64_t>(value) * (to - from);
     };
     double covered = 0.0;
     uint32_t next = 0;  // first pixel not yet written
@@ -1307,12 +1306,13 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       const uint32_t begin = spans[s].begin;
       uint32_t end = spans[s].end;
       for (++s; s < spans.size() && spans[s].begin <= end + 1; ++s) end = std::max(end, spans[s].end);
-      fill(next, begin, valueOf(covered));
+      fill(next, begin, covered);
       for (uint32_t i = begin; i <= end; ++i) {
         covered += cells[i];
         cells[i] = 0.0;
         if (i >= width) break;
         const uint8_t v = valueOf(covered);
+        sum += areaOf(v, covered);
         if (v == 0) continue;
         const uint32_t at = grid.mirrorX ? width - 1 - i : i;
         if (lightRow) {
@@ -1323,12 +1323,11 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
         }
         lo = std::min(lo, i);
         hi = i + 1;
-        sum += v;
       }
       cells[width] = 0.0;
       next = std::min(end + 1, width);
     }
-    fill(next, width, valueOf(covered));
+    fill(next, width, covered);
     if (keepFills && sink.at != rowFills) {
       const auto count = static_cast<std::size_t>(sink.at - rowFills);
       assert(count <= scratch.rowFills.size());
@@ -1340,7 +1339,10 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       out.rowFills[2 * r + 1] = static_cast<uint32_t>(count / 3);
       out.fills.insert(out.fills.end(), rowFills, sink.at);
     }
-    if (lo >= hi) continue;
+    if (lo >= hi) {  // dark, though a curve may have darkened some covered pixels
+      if (valueSum) *valueSum += sum;
+      continue;
+    }
     uint32_t begin = grid.mirrorX ? width - hi : lo, end = grid.mirrorX ? width - lo : hi;
     const bool hook = transfer && transfer->row;
     if (hook) transfer->row(transfer->context, r, begin, end, row);
@@ -1348,7 +1350,7 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
       while (begin < end && row[begin] == 0) ++begin;
       while (end > begin && row[end - 1] == 0) --end;
     }
-    if (hook) {  // the light map keeps the sum before it (the part's area)
+    if (hook) {  // the light map and the curve keep the sum before them (the part's area)
       sum = 0;
       for (uint32_t i = begin; i < end; ++i) sum += row[i];
     }
@@ -1358,6 +1360,18 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
     }
     if (valueSum) *valueSum += sum;
   }
+}
+
+CoverageCurve coverageCurve(const std::array<double, 256>& thresholds) {
+  CoverageCurve curve;
+  curve.thresholds = thresholds;
+  unsigned v = 0;
+  for (uint32_t k = 0; k <= CoverageCurve::kSteps; ++k) {
+    const double a = static_cast<double>(k) / CoverageCurve::kSteps;
+    while (v < 255 && a >= thresholds[v + 1]) ++v;
+    curve.start[k] = static_cast<uint8_t>(v);
+  }
+  return curve;
 }
 
 LightMap lightMapOf(const MaskImage& map) {

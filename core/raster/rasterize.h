@@ -221,10 +221,29 @@ struct LightMap {
 };
 LightMap lightMapOf(const MaskImage& map);
 
+// A non-decreasing map of the exact covered fraction a in [0, 1] to a value 0-255 (gamma, a threshold),
+// given by its steps: value(a) is the number of v in 1..255 with a >= thresholds[v], so that it is
+// exact on the coverage itself, not on the coverage rounded to 8 bits first (which dropped every pixel
+// under 1/510 covered, whatever the gamma). thresholds[v] > 0 (value(0) = 0: dark pixels stay dark) and
+// non-decreasing in v. A table of the value at k / kSteps gives the start of a short search.
+struct CoverageCurve {
+  static constexpr uint32_t kSteps = 4096;
+  std::array<double, 256> thresholds{};  // [0] unused
+  std::array<uint8_t, kSteps + 1> start{};
+  uint8_t value(double a) const {
+    if (!(a > 0)) return 0;
+    if (a > 1) a = 1;
+    unsigned v = start[static_cast<std::size_t>(a * kSteps)];
+    while (v < 255 && a >= thresholds[v + 1]) ++v;
+    return static_cast<uint8_t>(v);
+  }
+};
+// The curve of `thresholds` (thresholds[1..255] as above; [0] is ignored).
+CoverageCurve coverageCurve(const std::array<double, 256>& thresholds);
+
 // Optional transfer applied as the coverage values are written (gamma, threshold, light map), so that
 // it costs no second pass over the image:
-// - table: 256 entries; the written value is table[round(255 * a)]. table[0] must be 0 (dark pixels are
-//   never written). Gamma or a threshold is a table.
+// - curve: the written value is curve->value(a) instead of round(255 a) (gamma, a threshold).
 // - row: called once per row holding a non-zero value, right after the row is written (in cache), with
 //   the stored row index r (after mirroring) and the row's lit extent [begin, end); it may change any
 //   value in that span (a light-uniformity map scales it; values may become 0) but none outside it.
@@ -233,11 +252,12 @@ LightMap lightMapOf(const MaskImage& map);
 //   table) becomes round(v * m / 255), m the map's value at that pixel, as it is written: only lit
 //   pixels are touched, a run between edge pixels with one value per stretch of the map, and those
 //   stretches are listed as fills (one dimmed to 0 too, like the dark stretches between parts). The
-//   extents are trimmed of pixels dimmed to 0 at their ends, and valueSum is the sum before the map
-//   (the part's area; the map dims the light, not the part). Not together with `row`.
+//   extents are trimmed of pixels dimmed to 0 at their ends. Not together with `row`.
+// valueSum is the sum of round(255 a) whatever the curve and the light map (the part's area: gamma and
+// the map change the light, not the part), or with a row hook the sum of the values it leaves.
 struct LightMap;
 struct CoverageTransfer {
-  const uint8_t* table = nullptr;
+  const CoverageCurve* curve = nullptr;
   const LightMap* lightMap = nullptr;
   void (*row)(void* context, uint32_t r, uint32_t begin, uint32_t end, uint8_t* rowPixels) = nullptr;
   void* context = nullptr;
