@@ -35,6 +35,7 @@
 #include "core/slicing/contours.h"
 #include "io/coders/mask_png.h"
 #include "io/masks/exr_writer.h"
+#include "io/readers/mesh_reader.h"
 #include "io/readers/stl_writer.h"
 #include "tests/fixtures/archives.h"
 #include "tests/fixtures/shapes.h"
@@ -715,6 +716,29 @@ TEST_F(CliToolTemplate, VariantSlicedWithTheTableMatchesSlicingFromScratch) {
   EXPECT_TRUE(contains(scratch.out, "built")) << scratch.out;
   EXPECT_TRUE(readBytes(path("a.cli")) == readBytes(path("b.cli")));
   EXPECT_GT(fs::file_size(path("a.cli")), 1000u);
+}
+
+// A variant inside out against its template (here the femur mirrored in x: the same facets, every one
+// turned around), flipped by --fix-orientation, is every template facet reversed: sliced with the table
+// (edges 1 and 2 of each facet trade places), as from scratch. It failed the connectivity check.
+TEST_F(CliToolTemplate, FlippedInsideOutVariantUsesTheTable) {
+  ASSERT_EQ(run({"template", sharedModel("knee_femur_ssm_S001.stl").string(), "-o", "t.topo", "-q"}).code(),
+            0);
+  FacetSoup mirrored = readMesh(sharedModel("knee_femur_ssm_S002.stl"), {});
+  for (Point3f& p : mirrored.corners) p.x = -p.x;
+  writeBinaryStl(path("mirrored.stl"), mirrored, "mirrored", false);
+  const RunResult withTable =
+      run({"slice", "mirrored.stl", "-H", "0.5", "--template", "t.topo", "--fix-orientation", "-o", "a.cli"});
+  ASSERT_EQ(withTable.code(), 0) << withTable.describe();
+  EXPECT_TRUE(contains(withTable.out, "loaded from template, every facet reversed")) << withTable.out;
+  const RunResult scratch = run({"slice", "mirrored.stl", "-H", "0.5", "--fix-orientation", "-o", "b.cli"});
+  ASSERT_EQ(scratch.code(), 0) << scratch.describe();
+  EXPECT_TRUE(readBytes(path("a.cli")) == readBytes(path("b.cli")));
+  EXPECT_GT(fs::file_size(path("a.cli")), 1000u);
+  // Not flipped, it matches the table as it is (and warns that it is inside out).
+  const RunResult asIs = run({"slice", "mirrored.stl", "-H", "0.5", "--template", "t.topo", "-o", "c.cli"});
+  ASSERT_EQ(asIs.code(), 0) << asIs.describe();
+  EXPECT_TRUE(contains(asIs.out, "loaded from template (connectivity verified)")) << asIs.out;
 }
 
 TEST_F(CliToolTemplate, MismatchingVariantsAndBadTablesAreRefused) {
