@@ -843,6 +843,16 @@ TEST_F(CorrectionsCli, ProfileFileSettingsReachTheSl1) {
             std::string::npos)
       << ini.out;
   EXPECT_FALSE(fs::exists(path("b.sl1")));  // --explain writes nothing
+  // The display the masks have: --resolution (with the printer's pitch) and --mirror-y.
+  const RunResult display =
+      this->run({"slice", examplePart().string(), "--printer", "sl1", "--resolution", "2000x1000",
+                 "--mirror-y", "--masks", path("c.sl1").string(), "--explain"});
+  ASSERT_EQ(display.code(), 0) << display.describe();
+  for (const char* line : {"display_pixels_x           = 2000         (--resolution)",
+                           "display_width              = 94.5         (--resolution)",
+                           "display_height             = 47.25        (--resolution)",
+                           "display_mirror_y           = 1            (command line)"})
+    EXPECT_NE(display.out.find(line), std::string::npos) << line << "\n" << display.out;
   // A batch job's settings: its profile, material and print_settings, shown by batch --explain.
   tool_test::writeBytes(path("job.json"),
                         R"({"template": {"model": "m.stl"}, "settings": {"layer_height": 0.05,

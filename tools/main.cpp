@@ -702,9 +702,12 @@ int run(int argc, char** argv) {
       givenAs.push_back("--set " + assignment.substr(0, eq));
     }
     options.print = resolvePrintSettings(choice);
-    // --mirror-x/-y mirror the display on top of the printer's own mirroring: recorded as its setting.
+    // --mirror-x/-y mirror the display on top of the printer's own mirroring, --resolution and --pixel
+    // replace its size: recorded as its settings, so that --explain and the summary say what the images
+    // have.
     applyJobMirror(options.print, options.masks.mirrorX ? std::optional<bool>(true) : std::nullopt,
                    options.masks.mirrorY ? std::optional<bool>(true) : std::nullopt, "command line");
+    recordDisplayOptions(options.print, options.masks);
     const PrintSettings& print = options.print;
     needs(slice->count("--printer") > 0,
           masks || print.scales() || print.absoluteCorrection != 0 || print.elefantFootCompensation > 0,

@@ -155,6 +155,30 @@ double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& plan
   return planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
 }
 
+void recordDisplayOptions(PrintSettings& print, MaskOptions& o) {
+  if (!o.resolution && !o.pixel) return;
+  const bool pixelGiven = o.pixel.has_value();
+  // The printer's pitch, kept exactly as the masks use it (display_width / display_pixels_x).
+  const double printerPixel =
+      print.pixelsX > 0 && print.displayWidth > 0 ? print.displayWidth / print.pixelsX : 0.0;
+  if (!pixelGiven && printerPixel > 0) o.pixel = printerPixel;
+  const auto [width, height] =
+      o.resolution.value_or(std::pair<uint32_t, uint32_t>{print.pixelsX, print.pixelsY});
+  if (o.resolution) {
+    assignSetting(print, "display_pixels_x", std::to_string(width), "--resolution");
+    assignSetting(print, "display_pixels_y", std::to_string(height), "--resolution");
+  }
+  const auto nanometres = [](double mm) { return std::round(mm * 1e6) / 1e6; };
+  // (A display wider than the setting's range, 100 m, keeps the printer's numbers: the masks are
+  // refused as too large to fit in any case.)
+  if (o.pixel && *o.pixel > 0 && width > 0 && height > 0 &&
+      nanometres(std::max(width, height) * *o.pixel) <= 1e5) {
+    const std::string origin = pixelGiven ? "--pixel" : "--resolution";
+    assignSetting(print, "display_width", formatNumber(nanometres(width * *o.pixel)), origin);
+    assignSetting(print, "display_height", formatNumber(nanometres(height * *o.pixel)), origin);
+  }
+}
+
 MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
                     const std::string& name, const std::vector<double>& planes) {
   MaskJob job;

@@ -47,6 +47,11 @@ double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& plan
 
 // The mask job for `extent` (grid, printer model, layer count). Throws InputError for a missing image
 // size or pixel, or an extent that does not fit (unless o.crop).
+// --resolution and --pixel as the printer's display settings (display_pixels_x/y, display_width/height,
+// naming the option), so that --explain and the summary give the display the masks have; --resolution
+// alone keeps the printer's pitch, which `o` then carries as its pixel (the same bits the masks use).
+void recordDisplayOptions(PrintSettings& print, MaskOptions& o);
+
 MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
                     const std::string& name, const std::vector<double>& planes);
 
