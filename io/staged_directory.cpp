@@ -43,9 +43,11 @@ StagedDirectory::StagedDirectory(std::filesystem::path finalPath, bool overwrite
 
 StagedDirectory::~StagedDirectory() {
   if (committed_) return;
-  unregisterPendingOutput(registrySlot_);
+  // Removed while still registered: a second signal during the removal (thousands of layer files take
+  // a while) finds the folder in the registry and finishes it (it was left behind).
   std::error_code ec;
   std::filesystem::remove_all(tempPath_, ec);
+  unregisterPendingOutput(registrySlot_);
 }
 
 void StagedDirectory::commit() {

@@ -1276,6 +1276,38 @@ TEST_F(CliToolInterrupt, SecondSigintDuringPngFolderOutputLeavesNothing) {
   EXPECT_TRUE(contains(r.err, "interrupted")) << r.describe();
 }
 
+// The second signal while the first one's unwinding removes a large staged folder (thousands of EXR
+// layers): the folder stays known to the handler until it is gone. It was unregistered before its
+// files were removed, and a second Ctrl-C then left the folder, half full, saying the temporaries were
+// removed.
+TEST_F(CliToolInterrupt, SecondSignalWhileAStagedFolderIsRemovedLeavesNothing) {
+  const pid_t pid = start({"slice", sharedModel("knee_femur_ssm_mean.ply").string(), "-H", "0.005", "--pixel",
+                           "0.1", "--resolution", "1000x800", "--threads", "1", "--masks", "big.exr", "-q"});
+  ASSERT_GT(pid, 0);
+  // Until the staged folder holds 1,500 layers (or 20 s went by).
+  const auto begin = std::chrono::steady_clock::now();
+  std::size_t files = 0;
+  while (files < 1500 && std::chrono::steady_clock::now() - begin < 20s) {
+    files = 0;
+    for (const auto& name : temporariesIn(dir_)) {
+      std::error_code ec;
+      for (auto it = fs::directory_iterator(dir_ / name, ec); !ec && it != fs::directory_iterator();
+           it.increment(ec))
+        ++files;
+    }
+    std::this_thread::sleep_for(20ms);
+  }
+  ASSERT_EQ(::kill(pid, SIGTERM), 0) << std::strerror(errno);
+  std::this_thread::sleep_for(3ms);
+  ::kill(pid, SIGTERM);
+  const RunResult r = finish(pid, 30s);
+  EXPECT_TRUE(r.signalled(SIGTERM) || (r.exited() && r.code() != 0)) << r.describe();
+  EXPECT_FALSE(fs::exists(path("big.exr")));
+  const auto left = temporariesIn(dir_);
+  EXPECT_TRUE(left.empty()) << "left: " << testing::PrintToString(left) << " (" << files
+                            << " layers when signalled)";
+}
+
 // A read can block (a pipe that no one writes) or take long (a 3MF whose components place a mesh 10^10
 // times, inside lib3mf): the first signal was only a request the job would look at after the read, so a
 // single Ctrl-C did nothing. While a single-model command reads, the first signal stops it at once.
