@@ -799,6 +799,14 @@ TEST_F(PlateTest, BundledExampleIsFreshAndTheDemoJobRuns) {
   const auto entries = tool_test::zipEntryNames(readBytes(out / "plate_demo.sl1"));
   for (const char* thumbnail : {"thumbnail/thumbnail400x400.png", "thumbnail/thumbnail800x480.png"})
     EXPECT_NE(std::find(entries.begin(), entries.end(), thumbnail), entries.end()) << thumbnail;
+  // Without -O, the job's own paths (out/... beside the job file) have their folders made when missing,
+  // as a batch does (toposlice-mpi plate has no -O: the bundled demo failed there on a fresh checkout).
+  fs::create_directory(dir_ / "copy");
+  fs::copy(examples / "plate", dir_ / "copy" / "plate", fs::copy_options::recursive);
+  fs::copy_file(examples / "plate_demo.json", dir_ / "copy" / "plate_demo.json");
+  const tool_test::RunResult own = run({"plate", (dir_ / "copy" / "plate_demo.json").string(), "-q"});
+  ASSERT_EQ(own.code(), 0) << own.describe();
+  EXPECT_TRUE(fs::exists(dir_ / "copy" / "out" / "plate_demo.sl1"));
 }
 
 }  // namespace

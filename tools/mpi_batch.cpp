@@ -625,7 +625,8 @@ int runPlateRank(const Options& options, int rank, int size) {
   if (!go) return broadcastInt(1);
   const auto sliceStart = std::chrono::steady_clock::now();
 
-  // 2. Each rank slices its plates into temporaries of its own transaction.
+  // 2. Each rank slices its plates into temporaries of its own transaction (in the outputs' folders,
+  // made where missing as `toposlice plate` makes them).
   PlateResult& result = prepared->result();
   const PlateJob& job = prepared->job();
   OutputTransaction mine;
@@ -635,6 +636,7 @@ int runPlateRank(const Options& options, int rank, int size) {
        plate += static_cast<uint32_t>(size)) {
     const std::size_t before = mine.staged().size();
     try {
+      if (plate == static_cast<uint32_t>(rank)) makePlateOutputFolders(job, result.plates);
       prepared->slicePlate(plate, nullptr);
     } catch (const std::exception& e) {
       failedPlate = plate;

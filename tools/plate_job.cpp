@@ -832,10 +832,22 @@ void warnAboutLaterPlates(const PlateJob& job, PlateResult& result) {
                             (result.plates == 1 ? " plate" : " plates") + " and left them as they were");
 }
 
+void makePlateOutputFolders(const PlateJob& job, uint32_t plates) {
+  forEachPlateOutput(job, 0, plates, [](const std::filesystem::path& path, bool) {
+    const std::filesystem::path folder = path.parent_path();
+    if (folder.empty()) return;
+    std::error_code ec;
+    std::filesystem::create_directories(folder, ec);
+    if (ec && !std::filesystem::is_directory(folder))
+      throw OutputError(folder.string() + ": cannot create the output folder: " + ec.message());
+  });
+}
+
 PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress,
                         const std::function<void(uint32_t, uint32_t)>& onPlate) {
   PreparedPlateJob prepared(job);
   PlateResult& result = prepared.result();
+  makePlateOutputFolders(job, result.plates);
   // Slicing, plate by plate; every output of every plate and the report join one transaction.
   const auto start = std::chrono::steady_clock::now();
   OutputTransaction transaction;
@@ -864,14 +876,23 @@ PlateJob readPlateCommandJob(const std::filesystem::path& jobPath, const std::fi
 int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
                     const std::filesystem::path& outputDir) {
   const PlateJob job = readPlateCommandJob(jobPath, outputDir);
-  // The folder the user named for the outputs is made when missing (as `plate job.json -O out` in the
-  // README); the job's own output paths are used as given.
-  // A failed job takes the folders it made away again (they hold nothing then).
-  std::filesystem::path made;  // the outermost folder this run creates
-  if (!outputDir.empty()) {
-    for (std::filesystem::path p = std::filesystem::absolute(outputDir).lexically_normal();
+  // The folder the user named for the outputs (-O, as `plate job.json -O out` in the README) and those
+  // of the job's outputs are made when missing (the latter by runPlateJob). A failed job takes the
+  // folders it made away again (they hold nothing then).
+  std::vector<std::filesystem::path> made;  // the outermost folders this run creates
+  const auto outermostMissing = [&made](const std::filesystem::path& folder) {
+    std::filesystem::path outermost;
+    for (std::filesystem::path p = std::filesystem::absolute(folder).lexically_normal();
          !p.empty() && !outputPathExists(p) && p != p.parent_path(); p = p.parent_path())
-      made = p;
+      outermost = p;
+    if (!outermost.empty() && std::find(made.begin(), made.end(), outermost) == made.end())
+      made.push_back(outermost);
+  };
+  if (!outputDir.empty()) outermostMissing(outputDir);
+  forEachPlateOutput(job, 0, 1, [&](const std::filesystem::path& path, bool) {
+    if (!path.parent_path().empty()) outermostMissing(path.parent_path());
+  });
+  if (!outputDir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(outputDir, ec);
     if (ec) throw OutputError(outputDir.string() + ": cannot create the output folder: " + ec.message());
@@ -887,12 +908,14 @@ int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
       bar.setLabel("plate " + std::to_string(plate + 1) + "/" + std::to_string(plates) + " layers");
     });
   } catch (...) {
-    std::error_code ec;
-    bool empty = !made.empty();
-    for (auto it = std::filesystem::recursive_directory_iterator(made, ec);
-         empty && !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
-      empty = it->is_directory();
-    if (empty) std::filesystem::remove_all(made, ec);
+    for (const std::filesystem::path& folder : made) {
+      std::error_code ec;
+      bool empty = true;  // of files: folders only
+      for (auto it = std::filesystem::recursive_directory_iterator(folder, ec);
+           empty && !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
+        empty = it->is_directory();
+      if (empty && !ec) std::filesystem::remove_all(folder, ec);
+    }
     throw;
   }
   for (const auto& w : r.warnings) std::fprintf(stderr, "toposlice: warning: %s\n", w.c_str());  // even -q

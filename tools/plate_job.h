@@ -58,6 +58,11 @@ PrintSettings plateJobSettings(const PlateJob& job);
 PlateResult runPlateJob(const PlateJob& job, const ProgressContext* progress,
                         const std::function<void(uint32_t, uint32_t)>& onPlate = {});
 
+// Creates the folders that the outputs of plates [0, plates) go into where they are missing, as a
+// batch does (runPlateJob and toposlice-mpi, after preparing). Throws OutputError naming a folder that
+// cannot be made.
+void makePlateOutputFolders(const PlateJob& job, uint32_t plates);
+
 // A plate job read, checked and arranged, ready to be sliced plate by plate: runPlateJob slices every
 // plate in one process, toposlice-mpi (tools/mpi_batch.cpp) hands the plates to its ranks, each of
 // which prepares the same job. Preparing reads every part and template table, obtains each part's
