@@ -1004,6 +1004,27 @@ TEST_F(CliToolMasks, ModelThatDoesNotFitNeedsCrop) {
 // ---------------------------------------------------------------------------------------------------
 // 9. features (inter-model reuse)
 
+// Without masks the report's area is the solid region's under the positive rule, as the masks light it:
+// an add-on over the model counts once, a removal reaching out of the model takes nothing there. (The
+// signed areas' sum said 100 + 100 - 30 = 170 here.)
+TEST_F(CliToolFeatures, ContourOnlyAreaIsTheSolidRegions) {
+  writeBinaryStl(path("model.stl"), fixtures::box(0, 0, 0, 10, 10, 2), "model", false);
+  writeBinaryStl(path("add.stl"), fixtures::box(5, 0, 0, 15, 10, 2), "add", false);
+  writeBinaryStl(path("remove.stl"), fixtures::box(-2, 0, 0, 1, 10, 2), "remove", false);
+  const RunResult r = run({"slice", "model.stl", "--add", "add.stl", "--remove", "remove.stl", "-H", "1",
+                           "-o", "a.cli", "--report", "a.csv", "--summary", "a.json", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  const std::string csv = readBytes(path("a.csv"));
+  EXPECT_TRUE(contains(csv, "0,0.500000,140.000000,")) << csv;
+  EXPECT_TRUE(contains(csv, "1,1.500000,140.000000,")) << csv;
+  // The masks' area, for comparison: the same region (0.1 mm pixels, binary).
+  const RunResult m =
+      run({"slice", "model.stl", "--add", "add.stl", "--remove", "remove.stl", "-H", "1", "--masks", "m",
+           "--pixel", "0.1", "--resolution", "300x200", "--report", "m.csv", "-q"});
+  ASSERT_EQ(m.code(), 0) << m.describe();
+  EXPECT_TRUE(contains(readBytes(path("m.csv")), "0,0.500000,140.000000,")) << readBytes(path("m.csv"));
+}
+
 TEST_F(CliToolFeatures, AddOnsLightMorePixelsAndEngravingsFewer) {
   const std::string aligner = sharedModel("derived/aligner_upper_case0.stl.gz").string();
   const std::string monogram = sharedModel("derived/monogram_A1_on_aligner.stl").string();

@@ -867,6 +867,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   struct SlotState : MaskSlotScratch {
     std::vector<LayerResult> layers;
     LayerContours rawLoops;  // with a growing correction: the layer's raw offset loops, for its masks
+    LayerContours solid;     // without masks, a layer with features: its solid region's loops
   };
   const BandPlan plan = planBands(planes.size(), options.slice);
   std::vector<SlotState> slots(plan.slots);
@@ -926,8 +927,18 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     }
     if (!masks) {
       r.area = modelArea;  // layerSignedArea(layer[0]), without a second pass
-      for (std::size_t i = 1; i < layer.size(); ++i)
-        r.area += (i <= addCount ? 1 : -1) * layerSignedArea(layer[i]);
+      // With features, the solid region under the positive rule, as the masks light it: an add-on over
+      // the model counts once, a removal reaching out of it takes nothing there (the signed areas'
+      // sum counted both, off by 0.5 % on the aligner's monogram layers).
+      if (std::any_of(layer.begin() + 1, layer.end(),
+                      [](const LayerContours& f) { return f.loopCount() > 0; })) {
+        s.sets.clear();
+        for (std::size_t i = 0; i < layer.size(); ++i)
+          s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});
+        correctLayer(s.sets, LayerCorrection{}, layer[0].z, s.solid);
+        r.area = 0;
+        for (std::size_t l = 0; l < s.solid.loopCount(); ++l) r.area += signedArea(s.solid.loopPoints(l));
+      }
       return;
     }
     s.sets.clear();
