@@ -101,7 +101,8 @@ MeshReadOptions meshReadOptions(const CommonOptions& common) {
 
 void addCommon(CLI::App* app, CommonOptions& common) {
   app->add_option("--threads", common.threads, "Worker threads (default: all cores)");
-  app->add_flag("-q,--quiet", common.quiet, "No progress bar or summary, errors only");
+  app->add_flag("-q,--quiet", common.quiet,
+                "No progress bar or summary; warnings and errors are still printed");
 }
 
 struct PlaneOptions {

@@ -739,14 +739,15 @@ int run(int argc, char** argv) {
   CLI::App* batch = app.add_subcommand("batch", "Slice every variant of a batch job on every rank");
   batch->add_option("job", jobPath, "Batch job (JSON, see docs/FORMATS.md)")->required();
   batch->add_option("--threads", options.threads, "Worker threads per rank (default: all cores)");
-  batch->add_flag("-q,--quiet", options.quiet, "No progress lines or summary, errors only");
+  batch->add_flag("-q,--quiet", options.quiet,
+                  "No progress lines or summary; warnings and errors are still printed");
   batch->add_flag("--dispatch-only", options.dispatchOnly,
                   "Rank 0 hands out variants but slices none (with -np > 1)");
   CLI::App* plate = app.add_subcommand(
       "plate", "Slice the plates of a plate job on the ranks: plate n on rank (n - 1) mod N");
   plate->add_option("job", jobPath, "Plate job (JSON, see docs/FORMATS.md)")->required();
   plate->add_option("--threads", options.threads, "Worker threads per rank (default: all cores)");
-  plate->add_flag("-q,--quiet", options.quiet, "No summary, errors only");
+  plate->add_flag("-q,--quiet", options.quiet, "No summary; warnings and errors are still printed");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

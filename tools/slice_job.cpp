@@ -784,8 +784,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     if (masks && planes.size() == 1 && !options.planes.explicitZ.empty())
       throw InputError(
           "--z " + formatNumber(planes[0]) +
-          ": one explicit plane gives its layer no thickness, which a printer file needs (its layer "
-          "height, the resin volume): give two planes or more, or --layers 1");
+          ": one explicit plane gives its layer no thickness, which masks need (the layer height a "
+          "printer file or an EXR/VDB volume records, the resin volume): give two planes or more, or "
+          "--layers 1");
 
     job.name = model.stem().string();
     for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
