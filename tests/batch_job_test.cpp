@@ -320,6 +320,8 @@ TEST(BatchJob, RejectsBadValues) {
               "unknown contour format \".txt\" (expected .cli, .3mf or .svg)");
   expectError([](Json& j) { j["variants"][0]["masks"] = "out/v1"; }, "variants[0].masks",
               "unknown mask format");
+  expectError([](Json& j) { j["variants"][0]["report"] = "out/v1.txt"; }, "variants[0].report",
+              "unknown report format \".txt\" (expected .csv)");
   expectError([](Json& j) { j["variants"][0]["masks"] = "out/"; }, "variants[0].masks", "names a folder");
 }
 
@@ -334,8 +336,13 @@ TEST(BatchJob, RejectsClashingNamesAndPaths) {
               "already written");
   expectError([](Json& j) { j["variants"][0]["report"] = "out/template.topo"; }, "variants[0].report",
               "already written by template.table");
-  expectError([](Json& j) { j["variants"][0]["report"] = "models/template.stl"; }, "variants[0].report",
-              "is also an input (template.model)");
+  // Meshes are recognised by content: a model may have an output's extension.
+  expectError(
+      [](Json& j) {
+        j["template"]["model"] = "models/template.csv";
+        j["variants"][0]["report"] = "models/template.csv";
+      },
+      "variants[0].report", "is also an input (template.model)");
   expectError([](Json& j) { j["template"]["table"] = "features/monogram.stl"; }, "template.table",
               "unknown table format \".stl\" (expected .topo)");
 }

@@ -168,6 +168,21 @@ TEST_F(OutputSafety, BatchShowsEachVariantsWarningsEvenWhenQuiet) {
   EXPECT_TRUE(contains(r.err, "outside the model's height")) << r.describe();
 }
 
+// Masks with no image size anywhere in the job: refused when the job is read, naming its keys (it was
+// found per variant, after the earlier variants were sliced, naming slice's --printer).
+TEST_F(OutputSafety, BatchMasksWithoutAnImageAreRefusedFirst) {
+  writeBytes(path("box.stl"), boxStl(5, 0, false));
+  writeBytes(
+      path("job.json"),
+      "{\"template\": {\"model\": \"box.stl\", \"table\": \"t.topo\"}, \"settings\": {\"layer_height\": 1},"
+      " \"variants\": [{\"name\": \"a\", \"model\": \"box.stl\", \"contours\": \"a.cli\"},"
+      " {\"name\": \"b\", \"model\": \"box.stl\", \"masks\": \"b.sl1\"}]}");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "job.json: masks need an image size: give settings.printer")) << r.err;
+  EXPECT_EQ(entries(dir_), (std::vector<std::string>{"box.stl", "job.json"}));
+}
+
 // ---------------------------------------------------------------------------------------------------
 // 3. --force replaces only toposlice's own outputs.
 

@@ -5,6 +5,7 @@
 #include <system_error>
 
 #include "core/mesh/weld.h"
+#include "core/print/printer.h"
 #include "io/errors.h"
 #include "io/output_file.h"
 #include "io/readers/mesh_reader.h"
@@ -64,6 +65,25 @@ PrintSettings batchJobSettings(const BatchJob& job) {
       {job.profile, job.printer, job.material, job.printSettings, "batch job print_settings",
        job.sourceFile.string() + ": settings.printer", job.sourceFile.string() + ": settings.material"});
   applyJobMirror(print, job.mirrorX, job.mirrorY, "batch job settings.mirror");
+  // Masks need an image: refused here, before the template and any variant (it was found per variant,
+  // naming slice's options).
+  const bool masks = std::any_of(job.variants.begin(), job.variants.end(),
+                                 [](const BatchVariant& v) { return !v.masks.empty(); });
+  if (masks) {
+    const uint32_t width = job.resolution ? (*job.resolution)[0] : print.pixelsX;
+    const uint32_t height = job.resolution ? (*job.resolution)[1] : print.pixelsY;
+    const double pixel =
+        job.pixel ? *job.pixel
+                  : (print.pixelsX > 0 && print.displayWidth > 0 ? print.displayWidth / print.pixelsX : 0.0);
+    const std::string where = job.sourceFile.string() + ": ";
+    if (width == 0 || height == 0)
+      throw InputError(where + "masks need an image size: give settings.printer (" + printerNames() +
+                       ") or settings.resolution [W, H]");
+    if (!(pixel > 0))
+      throw InputError(
+          where + "masks need a pixel size: give settings.pixel (mm)" +
+          (print.printerName.empty() ? "" : ", printer '" + print.printerName + "' has none of its own"));
+  }
   return print;
 }
 

@@ -195,7 +195,8 @@ class JobParser : public JsonReader {
       if (const Json* x = find(item, "masks")) {
         variant.masks = output(*x, childPath(at, "masks"), kBatchMaskExtensions, "mask");
       }
-      if (const Json* x = find(item, "report")) variant.report = output(*x, childPath(at, "report"));
+      if (const Json* x = find(item, "report"))
+        variant.report = output(*x, childPath(at, "report"), kBatchReportExtensions, "report");
       if (variant.contours.empty() && variant.masks.empty() && variant.report.empty()) {
         fail(at, "no output (give contours, masks and/or report)");
       }

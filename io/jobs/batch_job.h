@@ -67,6 +67,7 @@ struct BatchJob {
 // Output extensions accepted for BatchVariant::contours and ::masks (lower case, with the dot).
 inline constexpr std::array<std::string_view, 3> kBatchContourExtensions = {".cli", ".3mf", ".svg"};
 inline constexpr std::array<std::string_view, 1> kTableExtensions = {".topo"};
+inline constexpr std::array<std::string_view, 1> kBatchReportExtensions = {".csv"};
 inline constexpr std::array<std::string_view, 6> kBatchMaskExtensions = {".sl1",     ".sl1s", ".goo",
                                                                          ".nanodlp", ".exr",  ".vdb"};
 
