@@ -919,6 +919,16 @@ TEST_F(CliToolBatch, SlicesEveryMatchingVariantReportsTheMismatchAndSkipsComplet
   EXPECT_TRUE(contains(again.out, "1 failed")) << again.out;
   expectNoTemporaries();
   EXPECT_TRUE(temporariesIn(path("out")).empty());
+
+  // An output that is not toposlice's (another program's file at its path, or one cut short) is no
+  // finished variant: it fails naming the file, which stays (it was skipped as "complete").
+  const std::string victim = femurs.begin()->first;
+  writeBytes(path("out/" + victim + ".cli"), "my own notes");
+  const RunResult foreign = run({"batch", "job.json"});
+  std::string line;
+  EXPECT_EQ(batchStatus(foreign.out, victim, &line), "failed") << foreign.out;
+  EXPECT_TRUE(contains(foreign.err, "not a cli file toposlice wrote")) << foreign.err;
+  EXPECT_EQ(readBytes(path("out/" + victim + ".cli")), "my own notes");
 }
 
 // ---------------------------------------------------------------------------------------------------

@@ -7,6 +7,7 @@
 #include "core/mesh/weld.h"
 #include "core/print/printer.h"
 #include "io/errors.h"
+#include "io/masks/mask_sink.h"
 #include "io/output_file.h"
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
@@ -56,8 +57,20 @@ std::vector<std::filesystem::path> batchVariantOutputs(const BatchVariant& varia
 bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
   const auto outputs = batchVariantOutputs(variant);
   if (outputs.empty() || job.overwrite) return false;
-  return std::all_of(outputs.begin(), outputs.end(),
-                     [](const auto& p) { return std::filesystem::exists(p); });
+  // Each output there and toposlice's own (its mark, a folder of marked layers): a file of another
+  // program, or one cut short, is no finished output (the variant then fails on it, naming it).
+  return std::all_of(outputs.begin(), outputs.end(), [&](const std::filesystem::path& p) {
+    if (!std::filesystem::exists(p)) return false;
+    try {
+      if (p == variant.masks)
+        checkMaskOutputAllowed(p, true);
+      else
+        checkOutputAllowed(p, true);
+    } catch (const OutputError&) {
+      return false;
+    }
+    return true;
+  });
 }
 
 PrintSettings batchJobSettings(const BatchJob& job) {

@@ -35,8 +35,8 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
 // The variant's output paths (contours, masks, report; those given), in that order.
 std::vector<std::filesystem::path> batchVariantOutputs(const BatchVariant& variant);
 
-// True when the variant has outputs, every one exists, and the job does not overwrite: such a variant
-// is skipped as complete.
+// True when the variant has outputs, every one exists and is toposlice's (its mark), and the job does
+// not overwrite: such a variant is skipped as complete.
 bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant);
 
 // The job's printer, material and corrections: its profile file (when given), printer and material, then
