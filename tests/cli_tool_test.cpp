@@ -931,6 +931,24 @@ TEST_F(CliToolBatch, SlicesEveryMatchingVariantReportsTheMismatchAndSkipsComplet
   EXPECT_EQ(readBytes(path("out/" + victim + ".cli")), "my own notes");
 }
 
+// A table left from another template (the job's template.model changed, the table file stayed): the
+// job is refused naming both, before any variant (each was blamed for its connectivity).
+TEST_F(CliToolBatch, ATableOfAnotherTemplateIsRefused) {
+  ASSERT_EQ(run({"template", sharedModel("knee_femur_ssm_S001.stl").string(), "-o", "t.topo", "-q"}).code(),
+            0);
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": " + jsonString(sharedModel("knee_tibia_ssm_S001.stl").string()) +
+                 ", \"table\": \"t.topo\"}, \"settings\": {\"layer_height\": 1}, \"variants\": "
+                 "[{\"name\": \"t2\", \"model\": " +
+                 jsonString(sharedModel("knee_tibia_ssm_S002.stl").string()) +
+                 ", \"contours\": \"t2.cli\"}]}");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  expectOneErrorLine(r);
+  EXPECT_TRUE(contains(r.err, "template.table") && contains(r.err, "is not the table of template.model"))
+      << r.err;
+  EXPECT_FALSE(fs::exists(path("t2.cli")));
+}
+
 // ---------------------------------------------------------------------------------------------------
 // 8. masks and report
 

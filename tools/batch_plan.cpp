@@ -11,6 +11,7 @@
 #include "io/output_file.h"
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
+#include "parallel/variant_screen.h"
 #include "tools/slice_stages.h"
 
 namespace toposlice {
@@ -20,15 +21,30 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
   // saved and every variant then fails on it.
   batchJobSettings(job);
   BatchTemplate t;
-  if (!job.templateFile.empty() && std::filesystem::exists(job.templateFile)) {
-    t.table = readTemplateFile(job.templateFile);
-    t.source = "loaded " + job.templateFile.string();
-  } else if (!job.templateModel.empty()) {
-    const ChunkRunner runner = parallelChunkRunner();
+  const auto readTemplateModel = [&job] {
     FacetSoup soup = readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale});
     // With "fix_orientation" the variants are turned right side out: so is an inside-out template, whose
     // table they are checked against.
     if (job.fixOrientation && measureSoup(soup.corners).volume < 0) flipFacets(soup.corners);
+    return soup;
+  };
+  if (!job.templateFile.empty() && std::filesystem::exists(job.templateFile)) {
+    t.table = readTemplateFile(job.templateFile);
+    t.source = "loaded " + job.templateFile.string();
+    // A table left from another template would fail every variant, each blamed for its connectivity:
+    // with the model named too, the table must describe it (the check every variant gets, linear).
+    if (!job.templateModel.empty()) {
+      const FacetSoup soup = readTemplateModel();
+      if (const auto mismatch = checkVariantConnectivityParallel(soup.corners, t.table.adjacency))
+        throw InputError(jobPath.string() + ": template.table " + job.templateFile.string() +
+                         " is not the table of template.model " + job.templateModel.string() + " (" +
+                         mismatch->reason +
+                         "): it was built from another model; delete it to build it again");
+      t.source += " (matches " + job.templateModel.string() + ")";
+    }
+  } else if (!job.templateModel.empty()) {
+    const ChunkRunner runner = parallelChunkRunner();
+    FacetSoup soup = readTemplateModel();
     t.table = buildTemplateTable(weldCorners(soup.corners, runner), runner);
     t.source = "built from " + job.templateModel.string();
     if (save && !job.templateFile.empty()) {
