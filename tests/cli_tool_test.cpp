@@ -201,6 +201,21 @@ TEST_F(CliToolInfo, CrackedPigReportsItsBoundaryEdges) {
   EXPECT_TRUE(contains(r.out, "boundary edges : 1296\n")) << r.out;  // SOURCES.md
   EXPECT_TRUE(contains(r.out, "facets         : 16848\n")) << r.out;
   EXPECT_TRUE(contains(r.out, "closed         : no")) << r.out;
+  // An open surface's volume depends on the reference point: said so.
+  EXPECT_TRUE(contains(r.out, "the mesh is not closed: an open surface encloses no definite volume"))
+      << r.out;
+}
+
+// Metre-sized models keep their digits (six decimals gave 0.000279 m^3 for a head) and no "-0" bound.
+TEST_F(CliToolInfo, SmallVolumesKeepTheirDigits) {
+  writeBinaryStl(path("tiny.stl"), fixtures::box(-0.0f, 0, 0, 0.01f, 0.02f, 0.03f), "tiny", false);
+  const RunResult r = run({"info", "tiny.stl"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  // 0.01 x 0.02 x 0.03 in floats: 6e-06 to seven digits.
+  EXPECT_TRUE(contains(r.out, "volume         : 5.9999996e-06 mm^3\n") ||
+              contains(r.out, "volume         : 6.0000002e-06 mm^3\n"))
+      << r.out;
+  EXPECT_FALSE(contains(r.out, "[-0,")) << r.out;
 }
 
 // ---------------------------------------------------------------------------------------------------

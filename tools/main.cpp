@@ -141,9 +141,10 @@ PlaneSpec planeSpec(const PlaneOptions& p) {
 }
 
 void printBox(const BoundingBox& b) {
+  const auto v = [](float x) { return double{x} + 0.0; };  // -0 prints as 0
   std::printf("bounding box   : [%.6g, %.6g] x [%.6g, %.6g] x [%.6g, %.6g] (size %.6g x %.6g x %.6g)\n",
-              b.min.x, b.max.x, b.min.y, b.max.y, b.min.z, b.max.z, double{b.max.x} - b.min.x,
-              double{b.max.y} - b.min.y, double{b.max.z} - b.min.z);
+              v(b.min.x), v(b.max.x), v(b.min.y), v(b.max.y), v(b.min.z), v(b.max.z),
+              double{b.max.x} - b.min.x, double{b.max.y} - b.min.y, double{b.max.z} - b.min.z);
 }
 
 // readMesh counted as a read in progress (a stop signal may end the process at once meanwhile).
@@ -172,9 +173,15 @@ int runInfo(const std::string& model, const MeshReadOptions& read, bool quiet) {
   std::printf("facets         : %zu\n", soup.facetCount());
   std::printf("vertices       : %zu (welded)\n", mesh.vertices.size());
   printBox(boundsOf(soup.corners));
-  std::printf("volume         : %.6f mm^3%s\n", volume,
-              volume < 0 ? " (negative: the mesh is inside out; slice with --fix-orientation)" : "");
-  std::printf("surface area   : %.6f mm^2\n", surfaceArea(soup.corners));
+  const bool closed =
+      edges.boundary == 0 && edges.nonManifold == 0 && edges.inconsistent == 0 && edges.degenerateFacets == 0;
+  // Nine significant digits: a model in metres (--units m aside) keeps its digits too.
+  std::printf("volume         : %.9g mm^3%s\n", volume + 0.0,
+              !closed      ? " (the mesh is not closed: an open surface encloses no definite volume; this is "
+                             "its signed volume against the bounding box's centre)"
+              : volume < 0 ? " (negative: the mesh is inside out; slice with --fix-orientation)"
+                           : "");
+  std::printf("surface area   : %.9g mm^2\n", surfaceArea(soup.corners));
   std::printf("shells         : %llu\n",
               static_cast<unsigned long long>(countShells(mesh.facetVertices, mesh.vertices.size())));
   std::printf("edges          : %llu\n", static_cast<unsigned long long>(edges.edges));
@@ -184,8 +191,6 @@ int runInfo(const std::string& model, const MeshReadOptions& read, bool quiet) {
               static_cast<unsigned long long>(edges.inconsistent));
   std::printf("degenerate     : %llu facets with a repeated corner (skipped when slicing)\n",
               static_cast<unsigned long long>(edges.degenerateFacets));
-  const bool closed =
-      edges.boundary == 0 && edges.nonManifold == 0 && edges.inconsistent == 0 && edges.degenerateFacets == 0;
   std::printf("closed         : %s\n",
               closed ? "yes (every edge has exactly two facets, consistently oriented)" : "no");
   return 0;
