@@ -57,11 +57,13 @@ struct LayerCorrection {
 
 // The sets' solid region, corrected, into `out` (cleared first; out.z = z). Steps, in order:
 // 1. S = the region of `sets` under the positive rule, grown by `absolute` (shrunk when negative).
-// 2. With elephantFoot e > 0 and r = minWidth / 2: the thin part T = S minus its opening by r (the
-//    points of S that no disc of diameter minWidth inside S covers), cleaned of slivers thinner than a
-//    micrometre. The result is (S shrunk by e) united with ((T grown by e) within S): everything at least
-//    minWidth wide is shrunk by e; thinner features keep their full width, and stay joined to the shrunk
-//    body by their root (the part of T's e-neighbourhood inside S).
+// 2. With elephantFoot e > 0 and minWidth w > 0: S shrunk by e, but no feature made narrower than w
+//    by it (PrusaSlicer's elefant_foot_min_width): a wall narrower than w keeps its width, one of width
+//    d between w and w + 2e ends w wide (to within 2 steps above), a wider one d - 2e. In n = ceil(e /
+//    12.5 um) steps of s = e / n: each takes the thin part T of the region R (R minus its opening by
+//    w/2 + s: the points that no disc of diameter w + 2s inside R covers, cleaned of slivers thinner
+//    than a micrometre) and makes R (R shrunk by s) united with ((T grown by s) within R), so thin
+//    features stay joined to the shrunk body by their root. With w = 0, S shrunk by e.
 // Returns the number of closed loops written.
 std::size_t correctLayer(std::span<const ContourSet> sets, const LayerCorrection& correction, double z,
                          LayerContours& out);

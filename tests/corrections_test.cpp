@@ -665,9 +665,12 @@ TEST(ElephantFoot, ThinPinsSurviveAndTheBodyShrinks) {
   const ContourSet set{&part, 1};
   LayerContours out;
   correctLayer({&set, 1}, {0, e, width}, 0.0, out);
-  // Body shrunk by e; each pin kept whole with its root: the pin's e-neighbourhood inside the body,
-  // (0.1 + 2e) x e.
-  const double expected = (10 - 2 * e) * (10 - 2 * e) + 2 * (0.1 * 1.0 + (0.1 + 2 * e) * e);
+  // Body shrunk by e; each pin kept whole, joined to the body by its root: in 16 steps of s = 12.5 um
+  // the root grows a step wider on each side per step inward while it is thinner than the minimum
+  // width (5 steps: 0.125, 0.15, ..., 0.225 wide, each s long), then goes on as a neck 0.25 wide to the
+  // shrunk body's edge (10 - e - 0.0625 = 0.1375 long).
+  const double s = e / 16, root = s * (0.125 + 0.15 + 0.175 + 0.2 + 0.225) + 0.25 * (e - 5 * s);
+  const double expected = (10 - 2 * e) * (10 - 2 * e) + 2 * (0.1 * 1.0 + root);
   EXPECT_NEAR(layerSignedArea(out), expected, 1e-5);
   EXPECT_EQ(out.loopCount(), 1u);  // the pins stay joined to the body
   // The pin tips are lit on a 10 um grid.
@@ -687,6 +690,40 @@ TEST(ElephantFoot, ThinPinsSurviveAndTheBodyShrinks) {
   // Without a minimum width the pins go with the rest.
   correctLayer({&set, 1}, {0, e, 0}, 0.0, out);
   EXPECT_NEAR(layerSignedArea(out), (10 - 2 * e) * (10 - 2 * e), 1e-5);
+}
+
+// PrusaSlicer's elefant_foot_min_width: no wall made narrower than the minimum width by the shrink. A
+// wall thinner than it keeps its width, one between w and w + 2e ends w wide (within two steps of
+// 12.5 um above), a wider one loses e on each side. Before, walls 0.25-0.4 mm wide vanished while a
+// 0.15 mm wall stayed, and a 0.5 mm wall ended 0.1 mm wide.
+TEST(ElephantFoot, NoWallEndsNarrowerThanTheMinimumWidth) {
+  const double e = 0.2, w = 0.2;
+  const std::vector<double> widths = {0.15, 0.25, 0.3, 0.4, 0.5, 0.6, 0.8};
+  LayerContours walls;
+  for (std::size_t i = 0; i < widths.size(); ++i) {
+    const double y = 2.0 * static_cast<double>(i);
+    addLoop(walls, {{0, y}, {10, y}, {10, y + widths[i]}, {0, y + widths[i]}});
+  }
+  const ContourSet set{&walls, 1};
+  LayerContours out;
+  correctLayer({&set, 1}, {0, e, w}, 0.0, out);
+  ASSERT_EQ(out.loopCount(), widths.size());
+  for (std::size_t l = 0; l < out.loopCount(); ++l) {
+    double lo = 1e9, hi = -1e9;
+    for (const Point2d& p : out.loopPoints(l)) lo = std::min(lo, p.y), hi = std::max(hi, p.y);
+    const std::size_t i = static_cast<std::size_t>(std::lround(lo / 2.0));
+    const double d = widths[i], width = hi - lo;
+    if (d < w) {
+      EXPECT_NEAR(width, d, 1e-6) << "wall " << d;
+    } else if (d <= w + 2 * e) {
+      EXPECT_GE(width, w - 1e-6) << "wall " << d;
+      EXPECT_LE(width, w + 2 * 0.0125 + 1e-6) << "wall " << d;
+    } else {
+      EXPECT_NEAR(width, d - 2 * e, 1e-6) << "wall " << d;
+    }
+    // Centred on the wall.
+    EXPECT_NEAR(0.5 * (lo + hi), 2.0 * static_cast<double>(i) + 0.5 * d, 1e-6) << "wall " << d;
+  }
 }
 
 TEST(ElephantFoot, FadesLinearlyOverItsLayers) {

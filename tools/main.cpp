@@ -256,7 +256,7 @@ void explainPrintSettings(const PrintSettings& p, const std::filesystem::path& m
               formatNumber(scale[1]).c_str(), formatNumber(scale[2]).c_str(), scaleCentre,
               p.scales() ? "" : " (none)");
   std::printf(
-      "offsets    : absolute %s mm on every layer; elephant foot %s mm on layer 0%s, sparing features "
+      "offsets    : absolute %s mm on every layer; elephant foot %s mm on layer 0%s, making no feature "
       "narrower than %s mm\n",
       formatNumber(p.absoluteCorrection).c_str(), formatNumber(p.elefantFootCompensation).c_str(),
       p.elephantFootFadeLayers() > 1

@@ -87,7 +87,8 @@ const SettingKey kKeys[] = {
     {"relative_correction_z", P, "printer scaling correction in z (factor; changes the layer count)", false},
     {"absolute_correction", P, "mm; every slice grown (+) or shrunk (-) by this distance", false},
     {"elefant_foot_compensation", P, "mm; the first layer(s) shrunk by this distance", false},
-    {"elefant_foot_min_width", P, "mm; features narrower than this keep their width", false},
+    {"elefant_foot_min_width", P,
+     "mm; the elephant foot makes no feature narrower than this (thinner ones keep their width)", false},
     {"elefant_foot_layers", P,
      "layers over which the elephant-foot shrink fades to 0 (default: the material's faded_layers, as "
      "PrusaSlicer)",
