@@ -199,6 +199,19 @@ TEST_F(OutputSafety, ForceRefusesAFolderWithForeignFiles) {
   expectNoTemporaries();
 }
 
+// An output inside the job's own mask folder (made and replaced as a whole): refused up front, naming
+// it. It was refused at the end, blaming the report's own temporary as a file toposlice did not write.
+TEST_F(OutputSafety, AnOutputInsideTheMaskFolderIsRefused) {
+  for (const char* masks : {"dd", "dd.exr"}) {
+    const std::string report = std::string(masks) + "/r.csv";
+    const RunResult r = run({"slice", examplePart().string(), "-H", "1", "--masks", masks, "--pixel", "0.2",
+                             "--resolution", "300x300", "--report", report, "-q"});
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, report + ": lies inside the mask folder " + masks)) << r.err;
+  }
+  EXPECT_TRUE(entries(dir_).empty());
+}
+
 TEST_F(OutputSafety, ForceReplacesAFolderToposliceWrote) {
   ASSERT_EQ(
       run({"slice", examplePart().string(), "-H", "0.5", "--masks", "masks", "--printer", "sl1"}).code(), 0);

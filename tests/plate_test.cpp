@@ -729,6 +729,23 @@ TEST_F(PlateTest, MasksOfAnUnknownFormatAreRefused) {
   }
 }
 
+// No output inside the plate's mask folder (made and replaced as a whole).
+TEST_F(PlateTest, AnOutputInsideTheMaskFolderIsRefused) {
+  const std::string part =
+      "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) + ", \"placement\": \"auto\"}";
+  try {
+    runPlateJob(job("{\"printer\": \"sl1\", \"parts\": [" + part +
+                    "], \"settings\": {\"layer_height\": 1}, \"outputs\": {\"masks\": \"m\", \"report\": "
+                    "\"m/r.json\"}}"),
+                nullptr);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("r.json: lies inside the mask folder"), std::string::npos)
+        << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "m"));
+}
+
 TEST_F(PlateTest, ExistingOutputsAreRefusedBeforeTheSlicing) {
   tool_test::writeBytes(dir_ / "r.json", "{\"kept\": 1}\n");
   const std::string missing =

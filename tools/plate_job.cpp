@@ -76,12 +76,25 @@ void forEachPlateOutput(const PlateJob& job, uint32_t first, uint32_t end,
 // "o/c-plate2.cli" beside "o/c.cli" on two plates): refused, as slice refuses an output given twice.
 void checkDistinctPlateOutputs(const PlateJob& job, uint32_t plates) {
   std::map<std::filesystem::path, std::filesystem::path> seen;  // resolved -> as named
-  forEachPlateOutput(job, 0, plates, [&](const std::filesystem::path& path, bool) {
+  std::vector<std::pair<std::filesystem::path, std::filesystem::path>>
+      folders;  // mask folders: resolved, named
+  const std::string maskExt = lowerExtension(job.masks);
+  forEachPlateOutput(job, 0, plates, [&](const std::filesystem::path& path, bool masks) {
     const auto [it, added] = seen.emplace(resolvedPath(path), path);
     if (!added)
       throw InputError(path.string() + ": given as more than one output" +
                        (it->second == path ? "" : " (it is " + it->second.string() + ")"));
+    if (masks && (maskExt.empty() || maskExt == ".exr")) folders.emplace_back(it->first, path);
   });
+  // A folder of masks (PNG or EXR layers) is made and replaced as a whole: no other output may lie in it.
+  for (const auto& [resolved, named] : seen)
+    for (const auto& [folder, folderNamed] : folders) {
+      if (resolved == folder) continue;
+      const auto [f, o] = std::mismatch(folder.begin(), folder.end(), resolved.begin(), resolved.end());
+      if (f == folder.end())
+        throw InputError(named.string() + ": lies inside the mask folder " + folderNamed.string() +
+                         ", which this job writes as a whole: give it a place outside");
+    }
 }
 
 // Outputs of plates [first, end) that may not be written (they exist and the job does not overwrite, or

@@ -456,6 +456,17 @@ static void checkDistinctOutputs(const SliceJobOptions& options) {
       if (resolved[i] == resolved[j])
         throw InputError(all[j].string() + ": given as more than one output" +
                          (all[i] == all[j] ? "" : " (it is " + all[i].string() + ")"));
+  // A folder of masks (PNG or EXR layers) is made and replaced as a whole: no other output may lie in it.
+  const std::string maskExt = lowerExtension(options.masks.output);
+  if (options.masks.output.empty() || !(maskExt.empty() || maskExt == ".exr")) return;
+  const std::filesystem::path folder = resolvedPath(options.masks.output);
+  for (std::size_t i = 0; i < all.size(); ++i) {
+    if (all[i] == options.masks.output) continue;
+    const auto [f, o] = std::mismatch(folder.begin(), folder.end(), resolved[i].begin(), resolved[i].end());
+    if (f == folder.end())
+      throw InputError(all[i].string() + ": lies inside the mask folder " + options.masks.output.string() +
+                       ", which this job writes as a whole: give it a place outside");
+  }
 }
 
 void checkNotAnInput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs) {
