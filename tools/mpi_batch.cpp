@@ -790,6 +790,10 @@ int run(int argc, char** argv) {
       }
     }
   }
+  // Done, and no temporaries left: a signal now is mpirun ending the ranks after one exited with an
+  // error status (the job's failure, already said), not an interrupt to report.
+  std::signal(SIGINT, SIG_DFL);
+  std::signal(SIGTERM, SIG_DFL);
   MPI_Finalize();
   return status;
 }
