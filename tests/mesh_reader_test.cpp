@@ -587,14 +587,11 @@ TEST(MeshReader, ThreeMfComponentsExpandingPastTheFacetLimitAreRefused) {
                 "than toposlice slices");
 }
 
-// lib3mf reads a unit it does not know as millimetres, silently (unit="parsec" came out 1:1): refused.
-TEST(MeshReader, ThreeMfUnknownUnitIsRefused) {
-  fixtures::ScratchDir dir;
-  writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_INCH, translation(0, 0, 0), false);
-  // The same package with the model's unit attribute rewritten (libzip, not lib3mf, which writes only
-  // the units it knows).
+// Rewrites the model part of the 3MF package at `path` with `edit` (libzip, not lib3mf, which writes
+// only what it understands).
+void editThreeMfModel(const fs::path& path, const std::function<void(std::string&)>& edit) {
   int err = 0;
-  zip_t* zip = zip_open((dir / "cube.3mf").c_str(), 0, &err);
+  zip_t* zip = zip_open(path.c_str(), 0, &err);
   ASSERT_NE(zip, nullptr);
   zip_stat_t st;
   zip_stat_init(&st);
@@ -604,17 +601,52 @@ TEST(MeshReader, ThreeMfUnknownUnitIsRefused) {
   ASSERT_NE(entry, nullptr);
   ASSERT_EQ(zip_fread(entry, model.data(), st.size), static_cast<zip_int64_t>(st.size));
   zip_fclose(entry);
-  const std::size_t unit = model.find("unit=\"inch\"");
-  ASSERT_NE(unit, std::string::npos) << model.substr(0, 300);
-  model.replace(unit, 11, "unit=\"parsec\"");
+  edit(model);
   zip_source_t* source = zip_source_buffer(zip, model.data(), model.size(), 0);
   ASSERT_GE(zip_file_add(zip, "3D/3dmodel.model", source, ZIP_FL_OVERWRITE), 0);
   ASSERT_EQ(zip_close(zip), 0);
+}
+
+// lib3mf reads a unit it does not know as millimetres, silently (unit="parsec" came out 1:1): refused.
+TEST(MeshReader, ThreeMfUnknownUnitIsRefused) {
+  fixtures::ScratchDir dir;
+  writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_INCH, translation(0, 0, 0), false);
+  // The same package with the model's unit attribute rewritten.
+  editThreeMfModel(dir / "cube.3mf", [](std::string& model) {
+    const std::size_t unit = model.find("unit=\"inch\"");
+    ASSERT_NE(unit, std::string::npos) << model.substr(0, 300);
+    model.replace(unit, 11, "unit=\"parsec\"");
+  });
   const std::string name = (dir / "cube.3mf").string();
   EXPECT_EQ(
       errorOf([&] { readMesh(dir / "cube.3mf"); }),
       name +
           ": unknown 3MF unit 'parsec' (a 3MF states micron, millimeter, centimeter, inch, foot or meter)");
+}
+
+// lib3mf's messages name no element: a model part cut short read as "contains no facets", a triangle
+// naming a vertex its mesh lacks as "Invalid model node index". Both are said as they are.
+TEST(MeshReader, ThreeMfBrokenModelPartsAreNamed) {
+  fixtures::ScratchDir dir;
+  writeThreeMfCube(dir / "cut.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
+  editThreeMfModel(dir / "cut.3mf", [](std::string& model) { model.resize(model.find("<triangles>") + 30); });
+  const std::string cut = errorOf([&] { readMesh(dir / "cut.3mf"); });
+  EXPECT_EQ(
+      cut.rfind((dir / "cut.3mf").string() +
+                    ": not a valid 3MF file: its model part 3D/3dmodel.model is cut short (its XML ends "
+                    "before </model>)",
+                0),
+      0u)
+      << cut;
+  writeThreeMfCube(dir / "index.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
+  editThreeMfModel(dir / "index.3mf", [](std::string& model) {
+    const std::size_t triangle = model.find("<triangle ", model.find("<triangle ") + 1);  // the second
+    const std::size_t v3 = model.find("v3=\"", triangle);
+    ASSERT_NE(v3, std::string::npos);
+    model.replace(v3 + 4, model.find('"', v3 + 4) - v3 - 4, "9");
+  });
+  const std::string what = errorOf([&] { readMesh(dir / "index.3mf"); });
+  EXPECT_NE(what.find("triangle 1: v3=\"9\" is no vertex of its mesh (it has 8)"), std::string::npos) << what;
 }
 
 TEST(MeshReader, ThreeMfDamagedPackage) {

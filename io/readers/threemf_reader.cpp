@@ -1,11 +1,15 @@
 #include "io/readers/threemf_reader.h"
 
 #include <array>
+#include <cctype>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <map>
+#include <string>
+#include <string_view>
 #include <vector>
 
 #include <zip.h>
@@ -89,7 +93,8 @@ std::string zipEntryText(std::span<const std::byte> bytes, const std::string& en
 // The unit attribute of the package's root model, as written ("" when it states none, the millimetre).
 // lib3mf takes a unit it does not know for millimetres without a word (unit="parsec" read 1:1), so the
 // reader checks the attribute itself.
-std::string statedUnit(std::span<const std::byte> bytes) {
+// The zip entry of the package's root model part, as its relationship names it.
+std::string rootModelEntry(std::span<const std::byte> bytes) {
   std::string root = "3D/3dmodel.model";
   const std::string rels = zipEntryText(bytes, "_rels/.rels", 1 << 16);
   if (const std::size_t type = rels.find("/3dmodel\""); type != std::string::npos) {
@@ -101,6 +106,63 @@ std::string statedUnit(std::span<const std::byte> bytes) {
     }
   }
   if (!root.empty() && root[0] == '/') root.erase(0, 1);
+  return root;
+}
+
+// The value of attribute `name` in the tag text `tag` ("" when absent).
+std::string attributeOf(std::string_view tag, std::string_view name) {
+  for (std::size_t at = tag.find(name); at != std::string_view::npos; at = tag.find(name, at + 1)) {
+    const std::size_t eq = at + name.size();
+    if (at == 0 || !std::isspace(static_cast<unsigned char>(tag[at - 1])) || eq + 1 >= tag.size() ||
+        tag[eq] != '=' || (tag[eq + 1] != '"' && tag[eq + 1] != '\''))
+      continue;
+    const std::size_t close = tag.find(tag[eq + 1], eq + 2);
+    if (close != std::string_view::npos) return std::string(tag.substr(eq + 2, close - eq - 2));
+  }
+  return "";
+}
+
+// Why lib3mf found a root model part unreadable or empty, where a scan of its text can tell (lib3mf's own
+// messages name no element): a part cut short, or the first triangle naming a vertex its mesh does not
+// have. "" when neither is found.
+std::string modelPartProblem(std::span<const std::byte> bytes) {
+  const std::string entry = rootModelEntry(bytes);
+  constexpr std::size_t kLimit = std::size_t{1} << 28;  // a larger part is not scanned
+  const std::string model = zipEntryText(bytes, entry, kLimit);
+  if (model.empty() || model.size() == kLimit) return "";
+  std::string_view text(model);
+  while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.remove_suffix(1);
+  if (!text.ends_with("model>"))
+    return "its model part " + entry + " is cut short (its XML ends before </model>)";
+  for (std::size_t object = text.find("<object"); object != std::string_view::npos;
+       object = text.find("<object", object + 1)) {
+    const std::size_t end = text.find("</object>", object);
+    const std::string_view body = text.substr(object, end == std::string_view::npos ? end : end - object);
+    const std::string id = attributeOf(body.substr(0, body.find('>')), "id");
+    uint64_t vertices = 0;
+    for (std::size_t v = body.find("<vertex"); v != std::string_view::npos; v = body.find("<vertex", v + 1))
+      vertices += body.substr(v, 9) != "<vertices" ? 1 : 0;
+    uint64_t triangle = 0;
+    for (std::size_t t = body.find("<triangle"); t != std::string_view::npos;
+         t = body.find("<triangle", t + 1)) {
+      if (body.substr(t, 10) == "<triangles") continue;
+      const std::string_view tag = body.substr(t, body.find('>', t) - t);
+      for (const char* corner : {"v1", "v2", "v3"}) {
+        const std::string value = attributeOf(tag, corner);
+        char* stop = nullptr;
+        const long long index = std::strtoll(value.c_str(), &stop, 10);
+        if (value.empty() || *stop != '\0' || index < 0 || static_cast<uint64_t>(index) >= vertices)
+          return "object " + id + ", triangle " + std::to_string(triangle) + ": " + corner + "=\"" + value +
+                 "\" is no vertex of its mesh (it has " + std::to_string(vertices) + ")";
+      }
+      ++triangle;
+    }
+  }
+  return "";
+}
+
+std::string statedUnit(std::span<const std::byte> bytes) {
+  const std::string root = rootModelEntry(bytes);
   const std::string model = zipEntryText(bytes, root, 1 << 16);  // the <model> tag opens the part
   const std::size_t tag = model.find("<model");
   if (tag == std::string::npos) return "";
@@ -125,7 +187,8 @@ class Reader {
     // lib3mf only reads the buffer; its interface is not const-correct.
     auto* data = const_cast<BYTE*>(reinterpret_cast<const BYTE*>(bytes.data()));
     if (NMR::lib3mf_reader_readfrombuffer(reader.get(), data, bytes.size()) != LIB3MF_OK) {
-      throwInputError(name_, "not a valid 3MF file: " + lastError(reader.get()));
+      const std::string why = lastError(reader.get()), problem = modelPartProblem(bytes);
+      throwInputError(name_, "not a valid 3MF file: " + (problem.empty() ? why : problem + " (" + why + ")"));
     }
     DWORD unit = 0;
     check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
@@ -161,7 +224,10 @@ class Reader {
       addObject(object.get(), placement, 0);
       check(NMR::lib3mf_builditemiterator_movenext(items.get(), &more), items.get(), "build items");
     }
-    if (soup_.corners.empty()) throwInputError(name_, "contains no facets");
+    if (soup_.corners.empty()) {
+      const std::string problem = modelPartProblem(bytes);
+      throwInputError(name_, problem.empty() ? "contains no facets" : "not a valid 3MF file: " + problem);
+    }
   }
 
  private:
