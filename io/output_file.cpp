@@ -446,6 +446,77 @@ void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::s
   if (ec) throw OutputError(path.string() + ": cannot list the existing folder: " + ec.message());
 }
 
+namespace {
+
+// The last `n` bytes of the regular file at `path` (fewer when it is shorter).
+std::string tailOf(const std::filesystem::path& path, std::size_t n) {
+  std::string tail;
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return tail;
+  struct stat st {};
+  if (::fstat(fd, &st) == 0) {
+    const auto size = static_cast<std::size_t>(st.st_size);
+    tail.resize(std::min(n, size));
+    const ssize_t got = ::pread(fd, tail.data(), tail.size(), static_cast<off_t>(size - tail.size()));
+    tail.resize(got > 0 ? static_cast<std::size_t>(got) : 0);
+  }
+  ::close(fd);
+  return tail;
+}
+
+// A toposlice file of its extension, whole as far as its format's end tells (not empty; the end a
+// complete file has, where the format has one).
+bool fileLooksWhole(const std::filesystem::path& path, const std::string& ext) {
+  std::error_code ec;
+  if (std::filesystem::file_size(path, ec) == 0 || ec) return false;
+  using namespace std::string_view_literals;
+  const auto endsWith = [&](std::string_view end) { return tailOf(path, end.size()) == end; };
+  if (ext == ".3mf" || ext == ".sl1" || ext == ".sl1s" || ext == ".nanodlp")
+    return endsWithOurZipComment(path);
+  if (ext == ".svg") return endsWith("</svg>\n"sv);
+  if (ext == ".png") return endsWith("IEND\xae\x42\x60\x82"sv);
+  if (ext == ".goo") return endsWith("\0\0\0\x07\0\0\0DLP\0"sv);
+  if (ext == ".csv") return endsWith("\n"sv);
+  if (ext == ".json") return endsWith("}\n"sv);
+  if (ext == ".cli") {  // an ASCII one ends with its geometry; a binary one has no end mark
+    char start[256] = {};
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return false;
+    const ssize_t n = ::read(fd, start, sizeof start);
+    ::close(fd);
+    const std::string_view header(start, n > 0 ? static_cast<std::size_t>(n) : 0);
+    return header.find("$$ASCII"sv) == std::string_view::npos || endsWith("$$GEOMETRYEND\n"sv);
+  }
+  return true;  // .exr, .vdb, .topo: not empty
+}
+
+}  // namespace
+
+bool outputLooksWhole(const std::filesystem::path& path, std::string_view layerExt) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::file_status st = fs::status(path, ec);
+  if (ec) return false;
+  if (st.type() == fs::file_type::regular) return fileLooksWhole(path, lowerExtension(path));
+  if (st.type() != fs::file_type::directory) return false;
+  // A folder of layers: at least one, each whole, numbered without a gap.
+  std::string ext(layerExt);
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  uint64_t count = 0, lowest = UINT64_MAX, highest = 0;
+  for (const fs::directory_entry& entry : fs::directory_iterator(path, ec)) {
+    const std::string name = entry.path().filename().string();
+    if (!isLayerFileName(name, ext) || !fileLooksWhole(entry.path(), ext)) return false;
+    const std::string stem = name.substr(0, name.size() - ext.size());
+    std::size_t digits = stem.size();
+    while (digits > 0 && std::isdigit(static_cast<unsigned char>(stem[digits - 1]))) --digits;
+    const uint64_t index = std::strtoull(stem.c_str() + digits, nullptr, 10);
+    lowest = std::min(lowest, index);
+    highest = std::max(highest, index);
+    ++count;
+  }
+  return !ec && count > 0 && highest - lowest + 1 == count;
+}
+
 // -----------------------------------------------------------------------------------------------------
 
 OutputTransaction::OutputTransaction() : previous_(tCurrentTransaction) {

@@ -153,6 +153,14 @@ enum class OutputKind { File, LayerFolder };
 // missing path is fine.
 void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
 
+// Whether an existing output at `path` (one that checkReplaceable finds toposlice's) is whole as far as
+// its format tells: a file not empty and ending as a complete one does (a zip with toposlice's comment,
+// an SVG's </svg>, a PNG's IEND chunk, a GOO's ending string, an ASCII CLI's $$GEOMETRYEND, a report's
+// last line break; EXR, VDB and template files only not empty); a folder of layers of `layerExt` with at
+// least one layer, each whole, numbered without a gap. For batch resumes: a variant whose outputs are
+// not whole is sliced again.
+bool outputLooksWhole(const std::filesystem::path& path, std::string_view layerExt = {});
+
 // The check every writer makes when it opens `path`, made up front by a command before its long work: a
 // missing path is fine; an existing one is refused without `overwrite` (outputExistsMessage) and, with
 // it, unless checkReplaceable allows it. Throws OutputError. The writers check again when they open and

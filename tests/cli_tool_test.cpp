@@ -944,6 +944,13 @@ TEST_F(CliToolBatch, SlicesEveryMatchingVariantReportsTheMismatchAndSkipsComplet
   EXPECT_EQ(batchStatus(foreign.out, victim, &line), "failed") << foreign.out;
   EXPECT_TRUE(contains(foreign.err, "not a cli file toposlice wrote")) << foreign.err;
   EXPECT_EQ(readBytes(path("out/" + victim + ".cli")), "my own notes");
+  // An empty output, or one of ours cut short, is not finished either: sliced again, whole.
+  for (const std::string& broken : {std::string(), bytes[victim].substr(0, bytes[victim].size() / 2)}) {
+    writeBytes(path("out/" + victim + ".cli"), broken);
+    const RunResult redo = run({"batch", "job.json"});
+    EXPECT_EQ(batchStatus(redo.out, victim), "ok") << redo.out;
+    EXPECT_TRUE(readBytes(path("out/" + victim + ".cli")) == bytes[victim]) << broken.size();
+  }
 }
 
 // A table left from another template (the job's template.model changed, the table file stayed): the

@@ -27,6 +27,7 @@
 #include "io/masks/mask_sink.h"
 #include "io/masks/sl1_writer.h"
 #include "io/masks/vdb_writer.h"
+#include "io/output_file.h"
 #include "tests/fixtures/archives.h"
 #include "tests/fixtures/scratch_dir.h"
 #include "tests/fixtures/shapes.h"
@@ -1366,6 +1367,45 @@ TEST_F(MaskStaging, InterruptedWritesLeaveNothing) {
     EXPECT_FALSE(fs::exists(dir_ / name)) << name;
     EXPECT_TRUE(strayEntries().empty()) << name << ": " << (strayEntries().empty() ? "" : strayEntries()[0]);
   }
+}
+
+// What a batch re-run takes as a finished output (outputLooksWhole): every sink's complete output, but
+// not an empty one, a PNG or GOO cut short, or a folder with a layer missing between others.
+TEST_F(MaskStaging, WholeOutputsAndBrokenOnes) {
+  const MaskJob job = smallJob(16, 16, 4, false);
+  const MaskImage m = discMask(16, 16, 8, 8, 5, false);
+  for (const char* name : {"stack", "part.sl1", "part.exr", "part.vdb", "part.goo", "part.nanodlp"}) {
+    auto sink = makeMaskSink(dir_ / name, job, false);
+    for (uint32_t k = 0; k < 4; ++k) sink->writeLayer(k, 0.0125 + 0.025 * k, m);
+    sink->finish(job);
+    const std::string ext = lowerExtension(dir_ / name);
+    EXPECT_TRUE(outputLooksWhole(dir_ / name, ext.empty() ? ".png" : ext)) << name;
+  }
+  const auto cut = [&](const fs::path& path) {
+    std::string bytes = tool_test::readBytes(path);
+    tool_test::writeBytes(path, bytes.substr(0, bytes.size() - 5));
+  };
+  cut(dir_ / "part.goo");
+  EXPECT_FALSE(outputLooksWhole(dir_ / "part.goo"));
+  cut(dir_ / "part.sl1");
+  EXPECT_FALSE(outputLooksWhole(dir_ / "part.sl1"));
+  tool_test::writeBytes(dir_ / "part.vdb", "");
+  EXPECT_FALSE(outputLooksWhole(dir_ / "part.vdb"));
+  std::vector<fs::path> layers;
+  for (const auto& e : fs::directory_iterator(dir_ / "stack")) layers.push_back(e.path());
+  std::sort(layers.begin(), layers.end());
+  ASSERT_EQ(layers.size(), 4u);
+  cut(layers[3]);
+  EXPECT_FALSE(outputLooksWhole(dir_ / "stack", ".png"));
+  fs::remove(layers[3]);  // the last layer gone: the layers left are whole and without a gap
+  EXPECT_TRUE(outputLooksWhole(dir_ / "stack", ".png"));
+  fs::remove(layers[1]);  // one between others gone
+  EXPECT_FALSE(outputLooksWhole(dir_ / "stack", ".png"));
+  std::vector<fs::path> exr;
+  for (const auto& e : fs::directory_iterator(dir_ / "part.exr")) exr.push_back(e.path());
+  std::sort(exr.begin(), exr.end());
+  fs::remove(exr[2]);
+  EXPECT_FALSE(outputLooksWhole(dir_ / "part.exr", ".exr"));
 }
 
 TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {

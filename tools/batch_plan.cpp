@@ -70,23 +70,32 @@ std::vector<std::filesystem::path> batchVariantOutputs(const BatchVariant& varia
   return out;
 }
 
+namespace {
+
+// An output of a variant that a re-run keeps: there, toposlice's own (its mark, a folder of marked
+// layers) and whole (not empty, not cut short where its format's end tells, a folder's layers without
+// a gap). Anything else is no finished output: the variant is sliced again (and fails on another
+// program's file, naming it).
+bool finishedOutput(const std::filesystem::path& p, bool masks) {
+  if (!std::filesystem::exists(p)) return false;
+  try {
+    if (masks)
+      checkMaskOutputAllowed(p, true);
+    else
+      checkOutputAllowed(p, true);
+  } catch (const OutputError&) {
+    return false;
+  }
+  return outputLooksWhole(p, lowerExtension(p) == ".exr" ? ".exr" : "");  // an EXR stack is a folder
+}
+
+}  // namespace
+
 bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant) {
   const auto outputs = batchVariantOutputs(variant);
   if (outputs.empty() || job.overwrite) return false;
-  // Each output there and toposlice's own (its mark, a folder of marked layers): a file of another
-  // program, or one cut short, is no finished output (the variant then fails on it, naming it).
-  return std::all_of(outputs.begin(), outputs.end(), [&](const std::filesystem::path& p) {
-    if (!std::filesystem::exists(p)) return false;
-    try {
-      if (p == variant.masks)
-        checkMaskOutputAllowed(p, true);
-      else
-        checkOutputAllowed(p, true);
-    } catch (const OutputError&) {
-      return false;
-    }
-    return true;
-  });
+  return std::all_of(outputs.begin(), outputs.end(),
+                     [&](const std::filesystem::path& p) { return finishedOutput(p, p == variant.masks); });
 }
 
 PrintSettings batchJobSettings(const BatchJob& job) {
@@ -174,10 +183,11 @@ BatchOutcome runBatchVariant(const BatchJob& job, const BatchVariant& variant, c
   const auto t0 = std::chrono::steady_clock::now();
   try {
     const auto outputs = batchVariantOutputs(variant);
-    std::size_t existing = 0;
+    std::size_t existing = 0, finished = 0;
     for (const auto& p : outputs) {
       if (!p.parent_path().empty()) std::filesystem::create_directories(p.parent_path());
       existing += std::filesystem::exists(p) ? 1 : 0;
+      finished += finishedOutput(p, p == variant.masks) ? 1 : 0;
     }
     SliceJobOptions options = batchSliceOptions(job, variant, table);
     // Some outputs but not all: an interrupted run committed the first ones (runSliceJob commits the
@@ -191,8 +201,8 @@ BatchOutcome runBatchVariant(const BatchJob& job, const BatchVariant& variant, c
     outcome.detail = r.topology;
     outcome.warnings = r.warnings;
     if (resumed)
-      outcome.detail += "; resumed: " + std::to_string(outputs.size() - existing) + " of " +
-                        std::to_string(outputs.size()) + " outputs were missing, the others rewritten";
+      outcome.detail += "; resumed: " + std::to_string(outputs.size() - finished) + " of " +
+                        std::to_string(outputs.size()) + " outputs were missing or not whole, all rewritten";
   } catch (const std::exception& e) {
     outcome.status = "failed";
     outcome.detail = e.what();
