@@ -968,7 +968,25 @@ TEST_F(CliToolBatch, ATableOfAnotherTemplateIsRefused) {
   expectOneErrorLine(r);
   EXPECT_TRUE(contains(r.err, "template.table") && contains(r.err, "is not the table of template.model"))
       << r.err;
+  EXPECT_TRUE(contains(r.err, "the model has 11756 facets, the table has 14622")) << r.err;
   EXPECT_FALSE(fs::exists(path("t2.cli")));
+}
+
+// The table of an inside-out template built without "fix_orientation" is its table with every facet
+// reversed for a job with it: accepted (it was refused as another model's), the variant sliced.
+TEST_F(CliToolBatch, ATableBuiltWithTheOtherOrientationIsTheModels) {
+  FacetSoup mirrored = readMesh(sharedModel("knee_femur_ssm_S001.stl"), {});
+  for (Point3f& p : mirrored.corners) p.x = -p.x;
+  writeBinaryStl(path("t.stl"), mirrored, "mirrored", false);
+  ASSERT_EQ(run({"template", "t.stl", "-o", "t.topo", "-q"}).code(), 0);
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": \"t.stl\", \"table\": \"t.topo\"}, \"settings\": "
+             "{\"layer_height\": 1, \"fix_orientation\": true}, \"variants\": [{\"name\": \"v\", "
+             "\"model\": \"t.stl\", \"contours\": \"v.cli\"}]}");
+  const RunResult r = run({"batch", "job.json"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  EXPECT_EQ(batchStatus(r.out, "v"), "ok") << r.out;
+  EXPECT_TRUE(contains(r.out, "every facet reversed")) << r.out;
 }
 
 // ---------------------------------------------------------------------------------------------------

@@ -35,11 +35,25 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     // with the model named too, the table must describe it (the check every variant gets, linear).
     if (!job.templateModel.empty()) {
       const FacetSoup soup = readTemplateModel();
-      if (const auto mismatch = checkVariantConnectivityParallel(soup.corners, t.table.adjacency))
-        throw InputError(jobPath.string() + ": template.table " + job.templateFile.string() +
-                         " is not the table of template.model " + job.templateModel.string() + " (" +
-                         mismatch->reason +
-                         "): it was built from another model; delete it to build it again");
+      if (const auto mismatch = checkVariantConnectivityParallel(soup.corners, t.table.adjacency)) {
+        // The model's table with every facet reversed (built with the other "fix_orientation" from an
+        // inside-out model) is its table all the same: the variants are checked against both.
+        std::vector<int32_t> reversed(t.table.adjacency.begin(), t.table.adjacency.end());
+        for (std::size_t e = 0; e + 2 < reversed.size(); e += 3) std::swap(reversed[e + 1], reversed[e + 2]);
+        if (checkVariantConnectivityParallel(soup.corners, reversed)) {
+          std::string why = mismatch->reason;  // the check's words are a variant's and a template's
+          for (const auto& [from, to] : {std::pair<std::string, std::string>{"the variant", "the model"},
+                                         {"the template has", "the table has"},
+                                         {"its neighbour in the template", "its neighbour in the table"},
+                                         {"the template's connectivity", "the table's connectivity"}})
+            for (std::size_t at = why.find(from); at != std::string::npos;
+                 at = why.find(from, at + to.size()))
+              why.replace(at, from.size(), to);
+          throw InputError(jobPath.string() + ": template.table " + job.templateFile.string() +
+                           " is not the table of template.model " + job.templateModel.string() + " (" + why +
+                           "): it was built from another model; delete it to build it again");
+        }
+      }
       t.source += " (matches " + job.templateModel.string() + ")";
     }
   } else if (!job.templateModel.empty()) {
