@@ -99,7 +99,10 @@ std::string rootModelEntry(std::span<const std::byte> bytes) {
   const std::string rels = zipEntryText(bytes, "_rels/.rels", 1 << 16);
   if (const std::size_t type = rels.find("/3dmodel\""); type != std::string::npos) {
     const std::size_t begin = rels.rfind('<', type), end = rels.find('>', type);
-    const std::string relationship = rels.substr(begin, end - begin);
+    // (A relationship without its '<' or '>', in a damaged package: the whole text around it.)
+    const std::string relationship = rels.substr(
+        begin == std::string::npos ? 0 : begin,
+        end == std::string::npos ? std::string::npos : end - (begin == std::string::npos ? 0 : begin));
     if (const std::size_t t = relationship.find("Target=\""); t != std::string::npos) {
       const std::size_t close = relationship.find('"', t + 8);
       if (close != std::string::npos) root = relationship.substr(t + 8, close - t - 8);
