@@ -451,6 +451,22 @@ TEST_F(PlateTest, GivenPlacementsAreMeasuredOnTheParts) {
   };
   EXPECT_NO_THROW(runPlateJob(job(text(2.4)), nullptr));
   fs::remove(dir_ / "p.cli");
+  // Overlapping parts with a spacing of 0 (the exact measure was asked for a distance up to 0 and
+  // accepted them), and two parts in one place.
+  for (const double gap : {-0.5, -10.0}) {
+    std::string zero = text(gap);
+    zero.replace(zero.find("\"spacing\": 2"), 12, "\"spacing\": 0");
+    try {
+      runPlateJob(job(zero), nullptr);
+      ADD_FAILURE() << "accepted, gap " << gap;
+    } catch (const InputError& e) {
+      EXPECT_NE(std::string(e.what()).find("parts 'a' and 'b' overlap or touch"), std::string::npos)
+          << e.what();
+    }
+  }
+  // A gap a few nanometres short of the spacing (placements in rounded decimals) is the spacing.
+  EXPECT_NO_THROW(runPlateJob(job(text(2.0 - 2.4e-5)), nullptr));
+  fs::remove(dir_ / "p.cli");
   try {
     runPlateJob(job(text(1.6)), nullptr);
     ADD_FAILURE() << "accepted";
@@ -461,6 +477,27 @@ TEST_F(PlateTest, GivenPlacementsAreMeasuredOnTheParts) {
         << e.what();
   }
   EXPECT_FALSE(fs::exists(dir_ / "p.cli"));
+}
+
+// A part's volume is its solid region's: an add-on over the model counts once, a removal reaching out
+// of it takes nothing there (the signed areas gave 100 + 100 - 30 = 170 mm^2 a layer), with or without
+// masks; the plate's volume without masks is the parts'.
+TEST_F(PlateTest, PartVolumesAreTheirSolidRegions) {
+  writeBinaryStl(dir_ / "model.stl", fixtures::box(0, 0, 0, 10, 10, 2), "model", false);
+  writeBinaryStl(dir_ / "add.stl", fixtures::box(5, 0, 0, 15, 10, 2), "add", false);
+  writeBinaryStl(dir_ / "remove.stl", fixtures::box(-2, 0, 0, 1, 10, 2), "remove", false);
+  for (const char* outputs : {R"({"contours": ["p.cli"]})", R"({"masks": "p.sl1"})"}) {
+    const PlateResult r = runPlateJob(
+        job(std::string(
+                "{\"printer\": \"sl1\", \"settings\": {\"layer_height\": 0.5}, \"parts\": [{\"name\": "
+                "\"a\", \"model\": \"model.stl\", \"add\": [\"add.stl\"], \"remove\": [\"remove.stl\"], "
+                "\"placement\": {\"x\": 40, \"y\": 30}}], \"outputs\": ") +
+            outputs + "}"),
+        nullptr);
+    ASSERT_EQ(r.parts.size(), 1u);
+    EXPECT_NEAR(r.parts[0].volumeMl, 0.28, 1e-9) << outputs;  // 140 mm^2 x 2 mm
+    EXPECT_NEAR(r.volumeMl[0], 0.28, outputs[2] == 'm' ? 0.003 : 1e-9) << outputs;
+  }
 }
 
 TEST_F(PlateTest, OtherConnectivityIsRefusedByNameUnlessRebuildIsAllowed) {

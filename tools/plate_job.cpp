@@ -348,7 +348,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     // Every mesh's contours on the plate; with corrections each part's model holds its corrected region
     // and its features are empty.
     std::vector<LayerContours> moved;
-    std::vector<double> partArea;  // per part: signed contour area
+    std::vector<double> partArea;  // per part: its solid region's area (model and features, positive rule)
     EncodedMaskLayer encoded;
     double area = 0;
   };
@@ -357,6 +357,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     Picture picture;
     LayerContours corrected;  // a part's corrected region where the part was sliced, before it is moved
     LayerContours raw;        // a part's raw offset loops where it was sliced (a growing correction)
+    LayerContours solid;      // a part's solid region, for its area, where it has features
     std::vector<LayerContours> maskLoops;  // per part: its raw offset loops moved, when its masks use them
     std::vector<uint8_t> rawMasks;         // per part: 1 when its masks rasterize maskLoops
   };
@@ -407,9 +408,23 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
       }
     }
     s.sets.clear();
-    for (std::size_t i = 0; i < layer.size(); ++i) {
-      r.partArea[owner[i]] += signs[i] * layerSignedArea(r.moved[i]);
-      s.sets.push_back({&r.moved[i], signs[i]});
+    for (std::size_t i = 0; i < layer.size(); ++i) s.sets.push_back({&r.moved[i], signs[i]});
+    // A part's area: its model's signed area, or with features in the layer the area of the solid
+    // region they make under the positive rule, as the masks light it (an add-on over the model counts
+    // once, a removal reaching out of it takes nothing there), as slice's report takes it.
+    for (std::size_t m = 0; m < partCount; ++m) {
+      const std::size_t first = partStart[m], end = m + 1 < partCount ? partStart[m + 1] : layer.size();
+      bool features = false;
+      for (std::size_t i = first + 1; i < end; ++i) features = features || r.moved[i].loopCount() > 0;
+      if (!features) {
+        r.partArea[m] = signs[first] * layerSignedArea(r.moved[first]);
+        continue;
+      }
+      correctLayer(std::span<const ContourSet>(s.sets).subspan(first, end - first), LayerCorrection{},
+                   layer[first].z, s.solid);
+      r.partArea[m] = 0;
+      for (std::size_t l = 0; l < s.solid.loopCount(); ++l)
+        r.partArea[m] += signedArea(s.solid.loopPoints(l));
     }
     r.area = 0;
     if (!masks) {
@@ -523,13 +538,16 @@ void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
     for (std::size_t b = a + 1; b < fixed.size(); ++b) {
       if (!shapesOverlap(grown[a], grown[b])) continue;
       const PlatePartResult &ra = results[fixed[a]], &rb = results[fixed[b]];
+      // Parts that overlap (distance 0) are refused whatever the spacing, 0 too; a gap up to a micrometre
+      // short of the spacing is taken as the spacing (placements given in rounded decimals).
+      constexpr double kToleranceMm = 0.001;
       const double distance = projectionDistance(projected(fixed[a]), ra.tx, ra.ty, projected(fixed[b]),
-                                                 rb.tx, rb.ty, job.spacing);
-      if (distance >= job.spacing * (1 - 1e-9)) continue;
+                                                 rb.tx, rb.ty, std::max(job.spacing, kToleranceMm));
+      if (distance > 0 && distance >= job.spacing - kToleranceMm) continue;
       problems.push_back(
           "parts '" + ra.name + "' and '" + rb.name + "' " +
           (distance > 0 ? "are " + mm(distance) + " apart, closer than the spacing of " + mm(job.spacing)
-                        : std::string("overlap")));
+                        : std::string("overlap or touch")));
     }
   if (!problems.empty()) throwProblems(job, "the plate cannot be printed as given", problems);
 }
