@@ -98,8 +98,11 @@ Paths compensateElephantFoot(const Paths& solid, double shrink, double minWidth)
     region = combine(shrunk, roots, ClipperLib::ctUnion);
   }
   // The steps leave notches a step wide where a root turns from thin to wide (a saw of 12.5 um teeth
-  // along a neck): closed by a closing of one step, which fills nothing wider.
-  return steps > 1 ? offset(offset(region, step), -step) : region;
+  // along a neck): closed by a closing of one step, which fills nothing wider. United with the region,
+  // which the closing's two outline cleanings would otherwise wear down where it is finely drawn (a
+  // 256-sided pin of 0.15 mm came out 0.145 mm).
+  if (steps == 1) return region;
+  return combine(region, offset(offset(region, step), -step), ClipperLib::ctUnion);
 }
 
 // std::llround, exactly, without the library call: v - trunc(v) is exact in double precision.
