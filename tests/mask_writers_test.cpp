@@ -1408,6 +1408,20 @@ TEST_F(MaskStaging, WholeOutputsAndBrokenOnes) {
   EXPECT_FALSE(outputLooksWhole(dir_ / "part.exr", ".exr"));
 }
 
+// OpenVDB's transform refuses a tiny scale with its own words ("ArithmeticError: Non-zero scale values
+// required"): said in ours, naming the sizes, before anything is written.
+TEST_F(MaskStaging, VdbVoxelTooSmallForOpenVdbIsNamed) {
+  MaskJob job = smallJob(16, 16, 2, false);
+  job.grid.pixel = 1e-9;
+  try {
+    makeMaskSink(dir_ / "tiny.vdb", job, false);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("a VDB voxel of 1e-09 x 1e-09 x"), std::string::npos) << e.what();
+  }
+  EXPECT_TRUE(strayEntries().empty());
+}
+
 TEST_F(MaskStaging, ExistingOutputNeedsOverwrite) {
   const MaskJob job = smallJob(16, 16, 1, false);
   const MaskImage m = discMask(16, 16, 8, 8, 5, false);

@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <cstdlib>
 
+#include "core/number_text.h"
 #include "core/raster/mask_runs.h"
 #include "io/errors.h"
 #include "io/masks/exr_writer.h"
@@ -67,7 +68,17 @@ std::unique_ptr<MaskSink> makeMaskSink(const std::filesystem::path& path, const 
   if (ext == ".goo") return makeGooSink(path, job, overwrite);
   if (ext == ".nanodlp") return makeNanoDlpSink(path, job, overwrite);
   if (ext == ".exr") return makeExrSink(path, job, overwrite);
-  if (ext == ".vdb") return makeVdbSink(path, job, overwrite);
+  if (ext == ".vdb") {
+    // OpenVDB refuses a transform whose scale's determinant is under 3e-15 ("Non-zero scale values
+    // required"): a voxel of pixel x pixel x layer height (mm) that small is said here, in our terms.
+    const double voxel = job.grid.pixel * job.grid.pixel * job.layerHeight;
+    if (!(voxel >= 1e-14))
+      throw InputError(path.string() + ": a VDB voxel of " + readableNumber(job.grid.pixel) + " x " +
+                       readableNumber(job.grid.pixel) + " x " + readableNumber(job.layerHeight) +
+                       " mm is too small for OpenVDB's transform (pixel^2 x layer height must be at least "
+                       "1e-14 mm^3): use larger pixels or layers");
+    return makeVdbSink(path, job, overwrite);
+  }
   return makePngDirectorySink(path, job, overwrite);
 }
 
