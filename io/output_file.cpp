@@ -1,11 +1,15 @@
 #include "io/output_file.h"
 
+#include <algorithm>
 #include <atomic>
 #include <cassert>
 #include <cctype>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <iterator>
+#include <optional>
 #include <string>
 #include <system_error>
 #include <utility>
@@ -423,8 +427,14 @@ void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::s
                         "' files, so it cannot have written it; not replaced" + refused);
     }
     if (emptyOrOurs(path, mark)) return;
-    throw OutputError(path.string() + ": exists and is not a " + lowerExtension(path).substr(1) +
-                      " file toposlice wrote (it lacks toposlice's mark); not replaced" + refused);
+    const std::string ext = lowerExtension(path);
+    const bool zip = ext == ".3mf" || ext == ".sl1" || ext == ".sl1s" || ext == ".nanodlp";
+    throw OutputError(path.string() + ": exists and is not a " + ext.substr(1) +
+                      " file toposlice wrote (it lacks toposlice's mark" +
+                      (zip ? ", the archive comment at its end, which an archive cut short loses too: delete "
+                             "such a one"
+                           : "") +
+                      "); not replaced" + refused);
   }
   if (st.type() != fs::file_type::directory)
     throw OutputError(path.string() + ": exists and is not a folder of layers toposlice wrote; not replaced" +
@@ -464,6 +474,52 @@ std::string tailOf(const std::filesystem::path& path, std::size_t n) {
   return tail;
 }
 
+// The EXR file at `path` as far as a scan line file's structure tells: its header's int attribute
+// `intName` (the layer count toposlice writes), and whether its last chunk ends where the file does
+// (the offset table after the header points at every chunk: y, data size, data).
+struct ExrShape {
+  std::optional<int32_t> value;
+  bool whole = false;
+};
+ExrShape exrShape(const std::filesystem::path& path, std::string_view intName) {
+  ExrShape shape;
+  std::ifstream in(path, std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const auto u32 = [&](std::size_t at) {
+    uint32_t v = 0;
+    std::memcpy(&v, bytes.data() + at, 4);
+    return v;
+  };
+  std::size_t at = 8;  // magic and version
+  if (bytes.size() < at) return shape;
+  for (;;) {  // attributes: name, type (both zero-terminated), size, value; an empty name ends them
+    const std::size_t nameEnd = bytes.find('\0', at);
+    if (nameEnd == std::string::npos) return shape;
+    if (nameEnd == at) break;
+    const std::size_t typeEnd = bytes.find('\0', nameEnd + 1);
+    if (typeEnd == std::string::npos || typeEnd + 5 > bytes.size()) return shape;
+    const uint32_t size = u32(typeEnd + 1);
+    const std::size_t value = typeEnd + 5;
+    if (size > bytes.size() - value) return shape;
+    if (std::string_view(bytes).substr(at, nameEnd - at) == intName && size == 4)
+      shape.value = static_cast<int32_t>(u32(value));
+    at = value + size;
+  }
+  const std::size_t table = at + 1;  // chunk 0's offset is the table's end: the table's length
+  if (table + 8 > bytes.size()) return shape;
+  uint64_t first = 0;
+  std::memcpy(&first, bytes.data() + table, 8);
+  if (first < table + 8 || first > bytes.size() || (first - table) % 8 != 0) return shape;
+  uint64_t last = 0;
+  for (std::size_t e = table; e < first; e += 8) {
+    uint64_t offset = 0;
+    std::memcpy(&offset, bytes.data() + e, 8);
+    last = std::max(last, offset);
+  }
+  shape.whole = last + 8 <= bytes.size() && last + 8 + u32(last + 4) == bytes.size();
+  return shape;
+}
+
 // A toposlice file of its extension, whole as far as its format's end tells (not empty; the end a
 // complete file has, where the format has one).
 bool fileLooksWhole(const std::filesystem::path& path, const std::string& ext) {
@@ -478,16 +534,40 @@ bool fileLooksWhole(const std::filesystem::path& path, const std::string& ext) {
   if (ext == ".goo") return endsWith("\0\0\0\x07\0\0\0DLP\0"sv);
   if (ext == ".csv") return endsWith("\n"sv);
   if (ext == ".json") return endsWith("}\n"sv);
-  if (ext == ".cli") {  // an ASCII one ends with its geometry; a binary one has no end mark
-    char start[256] = {};
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) return false;
-    const ssize_t n = ::read(fd, start, sizeof start);
-    ::close(fd);
-    const std::string_view header(start, n > 0 ? static_cast<std::size_t>(n) : 0);
-    return header.find("$$ASCII"sv) == std::string_view::npos || endsWith("$$GEOMETRYEND\n"sv);
+  if (ext == ".cli") {  // an ASCII one ends with its geometry; a binary one holds its header's layers
+    std::ifstream in(path, std::ios::binary);
+    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    const std::size_t end = bytes.find("$$HEADEREND"sv);
+    if (end == std::string::npos) return false;
+    const std::string_view header = std::string_view(bytes).substr(0, end);
+    if (header.find("$$ASCII"sv) != std::string_view::npos) return endsWith("$$GEOMETRYEND\n"sv);
+    const std::size_t count = header.find("$$LAYERS/"sv);
+    if (count == std::string_view::npos) return false;
+    const uint64_t layers = std::strtoull(bytes.c_str() + count + 9, nullptr, 10);
+    // Commands: uint16 127 (a layer: float32 z) or 130 (a polyline: int32 id, dir, n, n float32 pairs).
+    uint64_t seen = 0;
+    for (std::size_t at = end + 11; at < bytes.size();) {
+      if (at + 2 > bytes.size()) return false;
+      const auto command =
+          static_cast<uint16_t>(static_cast<uint8_t>(bytes[at]) | static_cast<uint8_t>(bytes[at + 1]) << 8);
+      at += 2;
+      if (command == 127) {
+        at += 4;
+        ++seen;
+      } else if (command == 130) {
+        if (at + 12 > bytes.size()) return false;
+        uint32_t n = 0;
+        std::memcpy(&n, bytes.data() + at + 8, 4);
+        at += 12 + std::size_t{8} * n;
+      } else {
+        return false;
+      }
+      if (at > bytes.size()) return false;
+    }
+    return seen == layers;
   }
-  return true;  // .exr, .vdb, .topo: not empty
+  if (ext == ".exr") return exrShape(path, "").whole;
+  return true;  // .vdb, .topo: not empty
 }
 
 }  // namespace
@@ -514,7 +594,15 @@ bool outputLooksWhole(const std::filesystem::path& path, std::string_view layerE
     highest = std::max(highest, index);
     ++count;
   }
-  return !ec && count > 0 && highest - lowest + 1 == count;
+  if (ec || count == 0 || lowest != 0 || highest + 1 != count) return false;
+  // An EXR layer says how many layers its stack has.
+  if (ext == ".exr") {
+    const fs::directory_iterator any(path, ec);
+    if (ec || any == fs::directory_iterator()) return false;
+    const std::optional<int32_t> layers = exrShape(any->path(), "layerCount").value;
+    return layers && static_cast<uint64_t>(*layers) == count;
+  }
+  return true;
 }
 
 // -----------------------------------------------------------------------------------------------------

@@ -336,6 +336,13 @@ TEST(BatchJob, RejectsClashingNamesAndPaths) {
               "already written");
   expectError([](Json& j) { j["variants"][0]["report"] = "out/template.topo"; }, "variants[0].report",
               "already written by template.table");
+  // An EXR stack is a folder made and replaced as a whole: nothing of the job inside it.
+  expectError(
+      [](Json& j) {
+        j["variants"][0]["masks"] = "out/v1.exr";
+        j["variants"][1]["contours"] = "out/v1.exr/v2.cli";
+      },
+      "variants[1].contours", "lies inside /jobs/out/v1.exr (variants[0].masks)");
   // Meshes are recognised by content: a model may have an output's extension.
   expectError(
       [](Json& j) {

@@ -308,6 +308,21 @@ TEST(CliWriter, ModelOnlySpanWritesTheSameBytesAsTheSingleLayerCall) {
   }
 }
 
+// What a batch re-run takes as finished (outputLooksWhole): a whole CLI, ASCII or binary, not one cut
+// short (ASCII: before $$GEOMETRYEND; binary: in a command, or with fewer layers than $$LAYERS says).
+TEST(CliWriter, WholeAndCutShortFiles) {
+  ScratchDir dir;
+  for (const bool binary : {false, true}) {
+    writeSample(dir / "a.cli", binary, true);
+    EXPECT_TRUE(outputLooksWhole(dir / "a.cli")) << "binary=" << binary;
+    const std::string bytes = readFile(dir / "a.cli");
+    for (const std::size_t cut : {std::size_t{1}, std::size_t{9}, bytes.size() / 2}) {
+      std::ofstream(dir / "a.cli", std::ios::binary) << bytes.substr(0, bytes.size() - cut);
+      EXPECT_FALSE(outputLooksWhole(dir / "a.cli")) << "binary=" << binary << ", cut " << cut;
+    }
+  }
+}
+
 TEST(CliWriter, Deterministic) {
   ScratchDir dir;
   for (const bool binary : {false, true}) {

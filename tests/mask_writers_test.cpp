@@ -1401,10 +1401,19 @@ TEST_F(MaskStaging, WholeOutputsAndBrokenOnes) {
   EXPECT_TRUE(outputLooksWhole(dir_ / "stack", ".png"));
   fs::remove(layers[1]);  // one between others gone
   EXPECT_FALSE(outputLooksWhole(dir_ / "stack", ".png"));
+  fs::remove(layers[0]);  // from 1: the first is missing
+  EXPECT_FALSE(outputLooksWhole(dir_ / "stack", ".png"));
+  // An EXR layer cut short ends before its last chunk; a stack short of its last layer has fewer layers
+  // than each one's layerCount says.
   std::vector<fs::path> exr;
   for (const auto& e : fs::directory_iterator(dir_ / "part.exr")) exr.push_back(e.path());
   std::sort(exr.begin(), exr.end());
-  fs::remove(exr[2]);
+  const std::string layer = tool_test::readBytes(exr[1]);
+  cut(exr[1]);
+  EXPECT_FALSE(outputLooksWhole(dir_ / "part.exr", ".exr"));
+  tool_test::writeBytes(exr[1], layer);
+  EXPECT_TRUE(outputLooksWhole(dir_ / "part.exr", ".exr"));
+  fs::remove(exr[3]);
   EXPECT_FALSE(outputLooksWhole(dir_ / "part.exr", ".exr"));
 }
 

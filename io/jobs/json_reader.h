@@ -292,13 +292,21 @@ class JsonReader {
   // light_map path is a job input, resolved against the job's folder.
   std::vector<std::pair<std::string, std::string>> printSettings(const Json& v, const std::string& at);
 
-  // No file is both read and written by the job (the table counts as written: it may be created).
+  // No file is both read and written by the job (the table counts as written: it may be created), and
+  // nothing the job reads or writes lies inside one of its outputs (a folder of EXR or PNG layers is made
+  // and replaced as a whole).
   void checkOutputs() const {
     for (const auto& [file, jsonPath] : outputs_) {
       if (const auto it = inputs_.find(file); it != inputs_.end()) {
         fail(jsonPath, file + " is also an input (" + it->second + ")");
       }
     }
+    for (const auto* paths : {&outputs_, &inputs_})
+      for (const auto& [file, jsonPath] : *paths)
+        for (const auto& [folder, folderPath] : outputs_)
+          if (file.size() > folder.size() + 1 && file.starts_with(folder) && file[folder.size()] == '/')
+            fail(jsonPath, file + " lies inside " + folder + " (" + folderPath +
+                               "), an output this job writes as a whole: give it a place outside");
   }
 
   fs::path baseDir_;
