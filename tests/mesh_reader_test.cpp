@@ -425,6 +425,19 @@ TEST(MeshReader, ObjCubeWithQuadsNegativeIndicesAndNormals) {
   EXPECT_EQ(std::memcmp(soup.corners.data(), ply.corners.data(), soup.corners.size() * sizeof(Point3f)), 0);
 }
 
+// A UTF-8 byte order mark before the first line: the same mesh (it dropped the first vertex and shifted
+// every face onto other corners, silently).
+TEST(MeshReader, ObjWithAByteOrderMarkIsTheSameMesh) {
+  std::string cube = objCube();
+  cube.erase(0, cube.find("\nv ") + 1);  // from the first vertex line on: the mark before a "v" line
+  ASSERT_TRUE(cube.starts_with("v ")) << cube.substr(0, 40);
+  const FacetSoup plain = parseMesh(bytesOf(cube), "cube.obj");
+  const FacetSoup marked = parseMesh(bytesOf("\xEF\xBB\xBF" + cube), "cube.obj");
+  ASSERT_EQ(marked.corners.size(), plain.corners.size());
+  EXPECT_EQ(std::memcmp(marked.corners.data(), plain.corners.data(), plain.corners.size() * sizeof(Point3f)),
+            0);
+}
+
 TEST(MeshReader, ObjErrorsNameTheFaceOrVertex) {
   const std::string cube = objCube();
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2\n"), "a.obj"); }),

@@ -156,7 +156,11 @@ FacetSoup parseObj(std::span<const std::byte> bytes, const std::string& name, Ob
   ObjSource& out = source ? *source : local;
   out = ObjSource{};
 
-  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  // A UTF-8 byte order mark (editors on Windows write one) is not part of the first line: left there,
+  // it made tinyobjloader read a first "v" line as another statement, dropping that vertex and
+  // shifting every face onto the wrong corners without a word.
+  if (text.starts_with("\xEF\xBB\xBF")) text.remove_prefix(3);
   checkVertexLines(text, name);
   SpanStreamBuf buffer(text);
   std::istream stream(&buffer);
