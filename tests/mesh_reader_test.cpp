@@ -660,6 +660,17 @@ TEST(MeshReader, ThreeMfBrokenModelPartsAreNamed) {
   });
   const std::string what = errorOf([&] { readMesh(dir / "index.3mf"); });
   EXPECT_NE(what.find("triangle 1: v3=\"9\" is no vertex of its mesh (it has 8)"), std::string::npos) << what;
+  // A coordinate that is not a number, which lib3mf reads as what it can of it (0, or 1 of "1,5").
+  for (const char* value : {"abc", "1,5", ""}) {
+    writeThreeMfCube(dir / "x.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
+    editThreeMfModel(dir / "x.3mf", [&](std::string& model) {
+      const std::size_t x = model.find("x=\"", model.find("<vertex "));
+      model.replace(x + 3, model.find('"', x + 3) - x - 3, value);
+    });
+    const std::string bad = errorOf([&] { readMesh(dir / "x.3mf"); });
+    EXPECT_NE(bad.find(std::string("vertex 0: x=\"") + value + "\" is not a number"), std::string::npos)
+        << bad;
+  }
 }
 
 TEST(MeshReader, ThreeMfDamagedPackage) {

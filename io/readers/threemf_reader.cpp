@@ -125,17 +125,18 @@ std::string attributeOf(std::string_view tag, std::string_view name) {
   return "";
 }
 
-// Why lib3mf found a root model part unreadable or empty, where a scan of its text can tell (lib3mf's own
-// messages name no element): a part cut short, or the first triangle naming a vertex its mesh does not
-// have. "" when neither is found.
-std::string modelPartProblem(std::span<const std::byte> bytes) {
+// What a scan of the root model part's text finds wrong that lib3mf does not name (its messages name no
+// element) or lets through: a vertex coordinate that is not a number, a triangle naming a vertex its
+// mesh does not have, and, when lib3mf failed or found nothing (`readFailed`), a part cut short. ""
+// when none is found.
+std::string modelPartProblem(std::span<const std::byte> bytes, bool readFailed) {
   const std::string entry = rootModelEntry(bytes);
   constexpr std::size_t kLimit = std::size_t{1} << 28;  // a larger part is not scanned
   const std::string model = zipEntryText(bytes, entry, kLimit);
   if (model.empty() || model.size() == kLimit) return "";
   std::string_view text(model);
   while (!text.empty() && std::isspace(static_cast<unsigned char>(text.back()))) text.remove_suffix(1);
-  if (!text.ends_with("model>"))
+  if (readFailed && !text.ends_with("model>"))
     return "its model part " + entry + " is cut short (its XML ends before </model>)";
   for (std::size_t object = text.find("<object"); object != std::string_view::npos;
        object = text.find("<object", object + 1)) {
@@ -143,8 +144,20 @@ std::string modelPartProblem(std::span<const std::byte> bytes) {
     const std::string_view body = text.substr(object, end == std::string_view::npos ? end : end - object);
     const std::string id = attributeOf(body.substr(0, body.find('>')), "id");
     uint64_t vertices = 0;
-    for (std::size_t v = body.find("<vertex"); v != std::string_view::npos; v = body.find("<vertex", v + 1))
-      vertices += body.substr(v, 9) != "<vertices" ? 1 : 0;
+    for (std::size_t v = body.find("<vertex"); v != std::string_view::npos; v = body.find("<vertex", v + 1)) {
+      if (body.substr(v, 9) == "<vertices") continue;
+      // lib3mf reads a coordinate that is not a number ("abc", "1,5", "") as what it can of it, silently.
+      const std::string_view tag = body.substr(v, body.find('>', v) - v);
+      for (const char* axis : {"x", "y", "z"}) {
+        const std::string value = attributeOf(tag, axis);
+        char* stop = nullptr;
+        std::strtod(value.c_str(), &stop);
+        if (value.empty() || stop == value.c_str() || *stop != '\0')
+          return "object " + id + ", vertex " + std::to_string(vertices) + ": " + axis + "=\"" + value +
+                 "\" is not a number";
+      }
+      ++vertices;
+    }
     uint64_t triangle = 0;
     for (std::size_t t = body.find("<triangle"); t != std::string_view::npos;
          t = body.find("<triangle", t + 1)) {
@@ -190,9 +203,12 @@ class Reader {
     // lib3mf only reads the buffer; its interface is not const-correct.
     auto* data = const_cast<BYTE*>(reinterpret_cast<const BYTE*>(bytes.data()));
     if (NMR::lib3mf_reader_readfrombuffer(reader.get(), data, bytes.size()) != LIB3MF_OK) {
-      const std::string why = lastError(reader.get()), problem = modelPartProblem(bytes);
+      const std::string why = lastError(reader.get()), problem = modelPartProblem(bytes, true);
       throwInputError(name_, "not a valid 3MF file: " + (problem.empty() ? why : problem + " (" + why + ")"));
     }
+    // What lib3mf lets through (a coordinate that is not a number) or reads as nothing.
+    if (const std::string problem = modelPartProblem(bytes, false); !problem.empty())
+      throwInputError(name_, "not a valid 3MF file: " + problem);
     DWORD unit = 0;
     check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
     setUnit(unit);
@@ -228,7 +244,7 @@ class Reader {
       check(NMR::lib3mf_builditemiterator_movenext(items.get(), &more), items.get(), "build items");
     }
     if (soup_.corners.empty()) {
-      const std::string problem = modelPartProblem(bytes);
+      const std::string problem = modelPartProblem(bytes, true);
       throwInputError(name_, problem.empty() ? "contains no facets" : "not a valid 3MF file: " + problem);
     }
   }
@@ -360,7 +376,11 @@ class Reader {
       placed_[v] = {static_cast<float>(xyz[0]), static_cast<float>(xyz[1]), static_cast<float>(xyz[2])};
     }
     const bool mirrored = determinant(placement) < 0;
-    soup_.corners.reserve(soup_.corners.size() + 3 * std::size_t{triangleCount});
+    // Grown geometrically (an exact reserve per placed mesh copied the whole soup at every one of 10^5
+    // placements: quadratic).
+    const std::size_t needed = soup_.corners.size() + 3 * std::size_t{triangleCount};
+    if (needed > soup_.corners.capacity())
+      soup_.corners.reserve(std::max(needed, 2 * soup_.corners.capacity()));
     for (DWORD t = 0; t < triangleCount; ++t) {
       const DWORD* i = triangles_[t].m_nIndices;
       if (i[0] >= vertexCount || i[1] >= vertexCount || i[2] >= vertexCount) {
