@@ -336,6 +336,9 @@ TEST(BatchJob, RejectsClashingNamesAndPaths) {
               "already written");
   expectError([](Json& j) { j["variants"][0]["report"] = "out/template.topo"; }, "variants[0].report",
               "already written by template.table");
+  // JSON can hold a NUL; a path cannot (the system read the path cut short: another file).
+  expectError([](Json& j) { j["variants"][0]["model"] = std::string("a.stl\0x", 7); }, "variants[0].model",
+              "a path holds no NUL character");
   // An EXR stack is a folder made and replaced as a whole: nothing of the job inside it.
   expectError(
       [](Json& j) {

@@ -1115,11 +1115,21 @@ TEST_F(CorrectionsCli, ProfilesRefuseRepeatedKeysAndTrueForANumber) {
        "p.json: printers.p.light_pwm: duplicate key"},
       {R"({"printers": {"p": {"inherits": "sl1"}}, "materials": {"m": {"exposure_time": true}}})",
        "exposure_time 'true': expected a number"},
+      // A chain of 18 levels is no circle, and a circle is one.
+      {[] {
+         std::string chain = R"({"printers": {"p": {"inherits": "c1"})";
+         for (int i = 1; i < 18; ++i)
+           chain += ", \"c" + std::to_string(i) + "\": {\"inherits\": \"c" + std::to_string(i + 1) + "\"}";
+         return chain + R"(, "c18": {"inherits": "sl1"}}})";
+       }(),
+       "'inherits' goes more than 16 levels deep"},
+      {R"({"printers": {"p": {"inherits": "q"}, "q": {"inherits": "p"}}})",
+       "'inherits' goes round in a circle"},
   };
   for (const auto& [profile, message] : cases) {
     tool_test::writeBytes(path("p.json"), profile);
     const RunResult r = this->run({"slice", examplePart().string(), "--profile", path("p.json").string(),
-                                   "--masks", path("m.sl1").string(), "-q"});
+                                   "--printer", "p", "--masks", path("m.sl1").string(), "-q"});
     expectOneErrorLine(r);
     EXPECT_NE(r.err.find(message), std::string::npos) << r.err;
   }

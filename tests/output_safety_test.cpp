@@ -355,6 +355,16 @@ TEST_F(OutputSafety, OutOfMemoryNamesTheInputAndLeavesNothing) {
   EXPECT_TRUE(contains(r.err, examplePart().string() + ": out of memory")) << r.err;
   EXPECT_FALSE(fs::exists(path("m.sl1")) || fs::exists(path("m.cli")));
   expectNoTemporaries();
+  // A batch variant and a plate part said "std::bad_alloc".
+  writeBytes(path("job.json"), "{\"template\": {\"model\": " + jsonString(examplePart().string()) +
+                                   "}, \"settings\": {\"layer_height\": 2, \"pixel\": 0.001, \"resolution\": "
+                                   "[100000, 100000]}, \"variants\": [{\"name\": \"v\", \"model\": " +
+                                   jsonString(examplePart().string()) + ", \"masks\": \"v.sl1\"}]}");
+  const RunResult batch = run({"batch", "job.json", "-q"});
+  EXPECT_EQ(batch.code(), 1) << batch.describe();
+  EXPECT_TRUE(contains(batch.err, "variant 'v'") && contains(batch.err, "out of memory")) << batch.err;
+  EXPECT_FALSE(contains(batch.err, "bad_alloc")) << batch.err;
+  EXPECT_FALSE(fs::exists(path("v.sl1")));
 }
 
 // A file-size limit (ulimit -f) does not kill the job with its temporaries in place: the write fails, the

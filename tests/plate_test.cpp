@@ -627,6 +627,17 @@ TEST_F(PlateTest, SpacingWiderThanThePlateIsRefused) {
         << e.what();
   }
   EXPECT_FALSE(fs::exists(dir_ / "p.sl1"));
+  // A rotation step so fine that arranging one part ran for minutes in gigabytes.
+  try {
+    job("{\"printer\": \"sl1\", \"arrange\": {\"rotation_step\": 1e-5}, \"parts\": [" + part +
+        "], \"outputs\": {\"masks\": \"p.sl1\"}}");
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("arrange.rotation_step: must be 0 (no rotation) or at least 1 degree"),
+        std::string::npos)
+        << e.what();
+  }
 }
 
 // A job run again with fewer plates left the earlier run's later plates beside its own, silently: a

@@ -217,6 +217,11 @@ BatchOutcome runBatchVariant(const BatchJob& job, const BatchVariant& variant, c
     if (resumed)
       outcome.detail += "; resumed: " + std::to_string(outputs.size() - finished) + " of " +
                         std::to_string(outputs.size()) + " outputs were missing or not whole, all rewritten";
+  } catch (const std::bad_alloc&) {  // said as such, not "std::bad_alloc"
+    outcome.status = "failed";
+    outcome.detail =
+        "out of memory: the variant needs more than the system gives this process (fewer "
+        "variants side by side or threads, a smaller image, or a smaller model)";
   } catch (const std::exception& e) {
     outcome.status = "failed";
     outcome.detail = e.what();

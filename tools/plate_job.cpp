@@ -673,6 +673,8 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         r.name = spec.name;
         r.topology = topo.topology;
         r.facets = part.model.facetCount();
+      } catch (const std::bad_alloc&) {  // named as the model it was reading, not "std::bad_alloc"
+        errors[p] = job.parts[p].model.string() + ": out of memory reading or preparing the part";
       } catch (const std::exception& failure) {
         errors[p] = failure.what();
       }
@@ -720,9 +722,11 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   arrange.margin = job.margin;
   arrange.spacing = job.spacing + residualSpacing(job, loaded, print);
   arrange.rotationStep = job.rotationStep;
+  arrange.cancel = &interruptRequested();
   Arrangement arranged;
   try {
     arranged = arrangeFootprints(items, arrange);
+    if (arranged.cancelled) throw InputError("interrupted");
   } catch (const std::invalid_argument& e) {
     const std::size_t p = std::stoul(e.what());
     throw InputError(job.sourceFile.string() + ": part '" + job.parts[p].name + "' (footprint " +

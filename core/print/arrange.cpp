@@ -406,6 +406,11 @@ Arrangement arrangeFootprints(std::span<const ArrangeItem> items, const ArrangeS
   });
 
   for (const std::size_t k : order) {
+    // A stop signal ends the arrangement between parts (it may take a while for many parts and angles).
+    if (settings.cancel != nullptr && settings.cancel->load(std::memory_order_relaxed)) {
+      result.cancelled = true;
+      return result;
+    }
     const Footprint& fp = *items[k].footprint;
     std::vector<CellShape> raw, grown;
     for (const double a : angles) {

@@ -15,6 +15,7 @@
 // `spacing` apart); margin: no part's cover within `margin` mm of the plate's edge.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -77,10 +78,11 @@ double projectionDistance(std::span<const std::span<const Point3f>> a, double ax
                           std::span<const std::span<const Point3f>> b, double bx, double by, double limit);
 
 struct ArrangeSettings {
-  double plateWidth = 0, plateHeight = 0;  // mm, the printable area from (0, 0)
-  double margin = 0;                       // mm kept free along every edge
-  double spacing = 1;                      // mm between parts
-  double rotationStep = 90;                // degrees tried: 0, step, 2 step, ... < 360; 0: no rotation
+  double plateWidth = 0, plateHeight = 0;     // mm, the printable area from (0, 0)
+  double margin = 0;                          // mm kept free along every edge
+  double spacing = 1;                         // mm between parts
+  double rotationStep = 90;                   // degrees tried: 0, step, 2 step, ... < 360; 0: no rotation
+  const std::atomic<bool>* cancel = nullptr;  // when set and true, arranging stops between parts
 };
 
 struct ArrangeItem {
@@ -100,6 +102,7 @@ struct Arrangement {
   uint32_t plates = 0;
   std::vector<double> footprintArea;  // per plate: the placed footprints' area, mm^2
   double usableArea = 0;              // mm^2 of one plate inside the margin
+  bool cancelled = false;             // stopped by ArrangeSettings::cancel: the placements are partial
   double density(uint32_t plate) const { return usableArea > 0 ? footprintArea[plate] / usableArea : 0; }
 };
 

@@ -224,7 +224,10 @@ class JsonReader {
 
   // A non-empty path string, resolved against the job's folder and normalised.
   fs::path path(const Json& v, const std::string& jsonPath) {
-    const fs::path p(string(v, jsonPath));
+    const std::string text = string(v, jsonPath);
+    // JSON can hold "\u0000"; a path cannot (the system would read it cut short, another file).
+    if (text.find('\0') != std::string::npos) fail(jsonPath, "a path holds no NUL character (\\u0000)");
+    const fs::path p(text);
     const fs::path resolved = p.is_absolute() || baseDir_.empty() ? p : baseDir_ / p;
     return resolved.lexically_normal();
   }

@@ -131,6 +131,10 @@ class PlateParser : public JsonReader {
         job_.rotationStep = nonNegative(*x, key("rotation_step"));
         if (job_.rotationStep >= 360)
           fail(key("rotation_step"), "must be below 360 degrees, got " + x->dump());
+        // Every rotation is tried for every part at every free position: a step of 1e-5 degrees ran for
+        // minutes in gigabytes. One degree is finer than a plate's cells tell apart.
+        if (job_.rotationStep > 0 && job_.rotationStep < 1)
+          fail(key("rotation_step"), "must be 0 (no rotation) or at least 1 degree, got " + x->dump());
       }
     }
     if (const Json* x = find(v, "cell")) {

@@ -4,6 +4,7 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -305,7 +306,24 @@ void applyProfile(PrintSettings& settings, const ProfileFile* file, SettingOwner
   const std::string askedAt = askedWhere.empty() ? std::string() : askedWhere + ": ";
   const char* section = owner == SettingOwner::Printer ? "printers" : "materials";
   const char* what = owner == SettingOwner::Printer ? "printer" : "material";
-  if (depth > 16) throw InputError(std::string(what) + " '" + name + "': 'inherits' goes round in a circle");
+  if (depth > 16) {
+    // A circle, or a straight chain that deep: which one, by walking on from here.
+    std::set<std::string> seen;
+    std::string at = name;
+    bool circle = false;
+    for (const Json* p = fileProfile(file, section, at);
+         p != nullptr && p->is_object() && p->contains("inherits") && (*p)["inherits"].is_string();
+         p = fileProfile(file, section, at)) {
+      if (!seen.insert(at).second) {
+        circle = true;
+        break;
+      }
+      at = (*p)["inherits"].get<std::string>();
+    }
+    throw InputError(std::string(what) + " '" + name + "': " +
+                     (circle ? "'inherits' goes round in a circle"
+                             : "'inherits' goes more than 16 levels deep, more than a profile may"));
+  }
   if (const Json* profile = fileProfile(file, section, name)) {
     const std::string where = file->path.string() + ": " + section + "." + name;
     if (!profile->is_object()) throw InputError(where + ": expected an object of settings");
