@@ -441,7 +441,10 @@ TEST(MeshReader, ObjWithAByteOrderMarkIsTheSameMesh) {
 TEST(MeshReader, ObjErrorsNameTheFaceOrVertex) {
   const std::string cube = objCube();
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2\n"), "a.obj"); }),
-            "a.obj: face 6: 2 corners, expected at least 3");
+            "a.obj: face 6 (line 24): 2 corners, expected at least 3");
+  // A bare "f" line was skipped without a word.
+  EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f\n"), "a.obj"); }),
+            "a.obj: face 6 (line 24): 0 corners, expected at least 3");
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2 9\n"), "a.obj"); }),
             "a.obj: face 6: vertex index 9 out of range (8 vertices)");
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2 -9\n"), "a.obj"); }),

@@ -62,12 +62,18 @@ void checkVertexLines(std::string_view text, const std::string& name) {
     pos = lf + 1;
     ++line;
     while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
-    if (rest.size() >= 2 && rest[0] == 'f' && blank(rest[1])) {
+    if ((rest.size() >= 2 && rest[0] == 'f' && blank(rest[1])) || rest == "f") {
       ++face;
-      rest.remove_prefix(2);
+      rest.remove_prefix(std::min<std::size_t>(2, rest.size()));
       for (int k = 0;; ++k) {
         while (!rest.empty() && blank(rest.front())) rest.remove_prefix(1);
-        if (rest.empty() || rest.front() == '#') break;
+        if (rest.empty() || rest.front() == '#') {
+          // (tinyobjloader skipped a face of no corner without a word)
+          if (k < 3)
+            throwInputError(name, "face " + std::to_string(face - 1) + " (line " + std::to_string(line) +
+                                      "): " + std::to_string(k) + " corners, expected at least 3");
+          break;
+        }
         std::size_t end = 0;
         while (end < rest.size() && !blank(rest[end])) ++end;
         const std::string_view corner = rest.substr(0, end);
