@@ -626,18 +626,19 @@ void editThreeMfModel(const fs::path& path, const std::function<void(std::string
 // lib3mf reads a unit it does not know as millimetres, silently (unit="parsec" came out 1:1): refused.
 TEST(MeshReader, ThreeMfUnknownUnitIsRefused) {
   fixtures::ScratchDir dir;
-  writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_INCH, translation(0, 0, 0), false);
-  // The same package with the model's unit attribute rewritten.
-  editThreeMfModel(dir / "cube.3mf", [](std::string& model) {
-    const std::size_t unit = model.find("unit=\"inch\"");
-    ASSERT_NE(unit, std::string::npos) << model.substr(0, 300);
-    model.replace(unit, 11, "unit=\"parsec\"");
-  });
-  const std::string name = (dir / "cube.3mf").string();
-  EXPECT_EQ(
-      errorOf([&] { readMesh(dir / "cube.3mf"); }),
-      name +
-          ": unknown 3MF unit 'parsec' (a 3MF states micron, millimeter, centimeter, inch, foot or meter)");
+  for (const std::string stated : {"parsec", ""}) {  // unit="" was read as millimetres
+    writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_INCH, translation(0, 0, 0), false);
+    // The same package with the model's unit attribute rewritten.
+    editThreeMfModel(dir / "cube.3mf", [&](std::string& model) {
+      const std::size_t unit = model.find("unit=\"inch\"");
+      ASSERT_NE(unit, std::string::npos) << model.substr(0, 300);
+      model.replace(unit, 11, "unit=\"" + stated + "\"");
+    });
+    const std::string name = (dir / "cube.3mf").string();
+    EXPECT_EQ(errorOf([&] { readMesh(dir / "cube.3mf"); }),
+              name + ": unknown 3MF unit '" + stated +
+                  "' (a 3MF states micron, millimeter, centimeter, inch, foot or meter)");
+  }
 }
 
 // lib3mf's messages name no element: a model part cut short read as "contains no facets", a triangle

@@ -704,6 +704,13 @@ TEST_F(PlateTest, TemplateAndPrinterProblemsNameThePartAndTheKey) {
               std::string::npos)
         << what;
   }
+  // A position no plate has (1e308 printed "inf mm" in the outside-the-plate message).
+  const std::string far = "{\"name\": \"a\", \"model\": " + q(tool_test::examplePart()) +
+                          ", \"placement\": {\"x\": 1e308, \"y\": 20}}";
+  const std::string farWhat =
+      message("{\"printer\": \"sl1\", \"parts\": [" + far + "], \"outputs\": {\"masks\": \"p.sl1\"}}");
+  EXPECT_NE(farWhat.find("parts[0].placement.x: must be a position on the plate in mm"), std::string::npos)
+      << farWhat;
 }
 
 // A plate job has no --force: its refusal of another program's file names what it has.

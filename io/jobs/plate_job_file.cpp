@@ -176,6 +176,11 @@ class PlateParser : public JsonReader {
         }
         if (!std::isfinite(placement.x) || !std::isfinite(placement.y) || !std::isfinite(placement.rotation))
           fail(pat, "must hold finite numbers");
+        // No plate is a kilometre wide; 1e308 made the outside-the-plate message print "inf mm".
+        for (const auto& [value, axis] : {std::pair{placement.x, "x"}, std::pair{placement.y, "y"}})
+          if (!(std::abs(value) <= 1e6))
+            fail(childPath(pat, axis),
+                 "must be a position on the plate in mm (at most 1e6), got " + p[axis].dump());
         part.placement = placement;
       }
       job_.parts.push_back(std::move(part));

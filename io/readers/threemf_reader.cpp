@@ -8,6 +8,7 @@
 #include <cstdlib>
 #include <limits>
 #include <map>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -177,17 +178,18 @@ std::string modelPartProblem(std::span<const std::byte> bytes, bool readFailed) 
   return "";
 }
 
-std::string statedUnit(std::span<const std::byte> bytes) {
+std::optional<std::string> statedUnit(std::span<const std::byte> bytes) {
   const std::string root = rootModelEntry(bytes);
   const std::string model = zipEntryText(bytes, root, 1 << 16);  // the <model> tag opens the part
   const std::size_t tag = model.find("<model");
-  if (tag == std::string::npos) return "";
+  if (tag == std::string::npos) return std::nullopt;
   const std::string start = model.substr(tag, model.find('>', tag) - tag);
   const std::size_t unit = start.find(" unit=");
-  if (unit == std::string::npos || unit + 7 >= start.size()) return "";
+  if (unit == std::string::npos || unit + 7 > start.size()) return std::nullopt;
   const char quote = start[unit + 6];
   const std::size_t close = start.find(quote, unit + 7);
-  return close == std::string::npos ? "" : start.substr(unit + 7, close - unit - 7);
+  if (close == std::string::npos) return std::nullopt;
+  return start.substr(unit + 7, close - unit - 7);  // "" for unit="": no unit of the six either
 }
 
 class Reader {
@@ -212,8 +214,8 @@ class Reader {
     DWORD unit = 0;
     check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
     setUnit(unit);
-    if (const std::string stated = statedUnit(bytes); !stated.empty() && stated != source_.unit)
-      throwInputError(name_, "unknown 3MF unit '" + stated +
+    if (const std::optional<std::string> stated = statedUnit(bytes); stated && *stated != source_.unit)
+      throwInputError(name_, "unknown 3MF unit '" + *stated +
                                  "' (a 3MF states micron, millimeter, centimeter, inch, foot or meter)");
 
     Lib3mfHandle items;
