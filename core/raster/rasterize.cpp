@@ -1364,7 +1364,8 @@ void rasterizeCoverage(std::span<const ContourSet> sets, const PixelGrid& grid, 
 
 CoverageCurve coverageCurve(const std::array<double, 256>& thresholds) {
   CoverageCurve curve;
-  curve.thresholds = thresholds;
+  std::copy(thresholds.begin(), thresholds.end(), curve.thresholds.begin());
+  curve.thresholds[256] = std::numeric_limits<double>::infinity();
   unsigned v = 0;
   for (uint32_t k = 0; k <= CoverageCurve::kSteps; ++k) {
     const double a = static_cast<double>(k) / CoverageCurve::kSteps;

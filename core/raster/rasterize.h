@@ -228,13 +228,13 @@ LightMap lightMapOf(const MaskImage& map);
 // non-decreasing in v. A table of the value at k / kSteps gives the start of a short search.
 struct CoverageCurve {
   static constexpr uint32_t kSteps = 4096;
-  std::array<double, 256> thresholds{};  // [0] unused
+  std::array<double, 257> thresholds{};  // [0] unused; [256] infinity, which ends every search
   std::array<uint8_t, kSteps + 1> start{};
   uint8_t value(double a) const {
     if (!(a > 0)) return 0;
-    if (a > 1) a = 1;
+    if (a >= 1) return start[kSteps];
     unsigned v = start[static_cast<std::size_t>(a * kSteps)];
-    while (v < 255 && a >= thresholds[v + 1]) ++v;
+    while (a >= thresholds[v + 1]) ++v;
     return static_cast<uint8_t>(v);
   }
 };
