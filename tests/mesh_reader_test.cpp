@@ -438,6 +438,24 @@ TEST(MeshReader, ObjWithAByteOrderMarkIsTheSameMesh) {
             0);
 }
 
+// A comment after a face's corners is no corner (it was read as one, and the face refused).
+TEST(MeshReader, ObjCommentsAfterStatementsAreIgnored) {
+  const std::string cube = objCube();
+  std::string commented;
+  for (std::size_t at = 0; at < cube.size();) {
+    const std::size_t end = cube.find('\n', at);
+    const std::string line = cube.substr(at, end - at);
+    commented += line + (line.starts_with("f ") || line.starts_with("v ") ? " # note#2" : "") + "\n";
+    at = end + 1;
+  }
+  const FacetSoup plain = parseMesh(bytesOf(cube), "cube.obj");
+  const FacetSoup withComments = parseMesh(bytesOf(commented), "cube.obj");
+  ASSERT_EQ(withComments.corners.size(), plain.corners.size());
+  EXPECT_EQ(
+      std::memcmp(withComments.corners.data(), plain.corners.data(), plain.corners.size() * sizeof(Point3f)),
+      0);
+}
+
 TEST(MeshReader, ObjErrorsNameTheFaceOrVertex) {
   const std::string cube = objCube();
   EXPECT_EQ(errorOf([&] { parseMesh(bytesOf(cube + "f 1 2\n"), "a.obj"); }),
@@ -664,6 +682,20 @@ TEST(MeshReader, ThreeMfBrokenModelPartsAreNamed) {
   });
   const std::string what = errorOf([&] { readMesh(dir / "index.3mf"); });
   EXPECT_NE(what.find("triangle 1: v3=\"9\" is no vertex of its mesh (it has 8)"), std::string::npos) << what;
+  // Well-formed XML the scan must read as lib3mf does: white space around '=' and around a number.
+  writeThreeMfCube(dir / "spaced.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
+  const FacetSoup plain = readMesh(dir / "spaced.3mf");
+  editThreeMfModel(dir / "spaced.3mf", [](std::string& model) {
+    for (std::size_t at = model.find("<vertex x=\""); at != std::string::npos;
+         at = model.find("<vertex x=\"", at))
+      model.replace(at, 11, "<vertex x = \" ");
+    for (std::size_t at = model.find(" v1=\""); at != std::string::npos; at = model.find(" v1=\"", at + 1))
+      model.replace(at, 5, " v1 =\" ");
+  });
+  const FacetSoup spaced = readMesh(dir / "spaced.3mf");
+  ASSERT_EQ(spaced.corners.size(), plain.corners.size());
+  EXPECT_EQ(std::memcmp(spaced.corners.data(), plain.corners.data(), plain.corners.size() * sizeof(Point3f)),
+            0);
   // A coordinate that is not a number, which lib3mf reads as what it can of it (0, or 1 of "1,5").
   for (const char* value : {"abc", "1,5", ""}) {
     writeThreeMfCube(dir / "x.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);

@@ -177,8 +177,9 @@ int runInfo(const std::string& model, const MeshReadOptions& read, bool quiet) {
       edges.boundary == 0 && edges.nonManifold == 0 && edges.inconsistent == 0 && edges.degenerateFacets == 0;
   // Nine significant digits: a model in metres (--units m aside) keeps its digits too.
   std::printf("volume         : %.9g mm^3%s\n", volume + 0.0,
-              !closed      ? " (the mesh is not closed: an open surface encloses no definite volume; this is "
-                             "its signed volume against the bounding box's centre)"
+              !closed ? " (the mesh is not closed: where edges are open, shared by more than two facets or "
+                        "turned the wrong way it encloses no definite volume; this is its signed volume "
+                        "against the bounding box's centre)"
               : volume < 0 ? " (negative: the mesh is inside out; slice with --fix-orientation)"
                            : "");
   std::printf("surface area   : %.9g mm^2\n", surfaceArea(soup.corners));

@@ -167,6 +167,20 @@ FacetSoup parseObj(std::span<const std::byte> bytes, const std::string& name, Ob
   // it made tinyobjloader read a first "v" line as another statement, dropping that vertex and
   // shifting every face onto the wrong corners without a word.
   if (text.starts_with("\xEF\xBB\xBF")) text.remove_prefix(3);
+  // A comment after a statement ("f 1 2 3 # top") is no part of it; tinyobjloader took it for a corner
+  // of a face. Comments are blanked out (a copy of the text, only when it has one).
+  std::string uncommented;
+  if (text.find('#') != std::string_view::npos) {
+    uncommented.assign(text);
+    for (std::size_t hash = uncommented.find('#'); hash != std::string::npos;
+         hash = uncommented.find('#', hash)) {
+      const std::size_t end = std::min(uncommented.find('\n', hash), uncommented.size());
+      std::fill(uncommented.begin() + static_cast<std::ptrdiff_t>(hash),
+                uncommented.begin() + static_cast<std::ptrdiff_t>(end), ' ');
+      hash = end;
+    }
+    text = uncommented;
+  }
   checkVertexLines(text, name);
   SpanStreamBuf buffer(text);
   std::istream stream(&buffer);

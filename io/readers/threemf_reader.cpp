@@ -91,6 +91,23 @@ std::string zipEntryText(std::span<const std::byte> bytes, const std::string& en
   return text;
 }
 
+// Whether the zip `bytes` holds the entry `entry`.
+bool zipHasEntry(std::span<const std::byte> bytes, const std::string& entry) {
+  zip_error_t error;
+  zip_error_init(&error);
+  zip_source_t* source = zip_source_buffer_create(bytes.data(), bytes.size(), 0, &error);
+  zip_t* archive = source != nullptr ? zip_open_from_source(source, ZIP_RDONLY, &error) : nullptr;
+  bool found = false;
+  if (archive == nullptr) {
+    if (source != nullptr) zip_source_free(source);
+  } else {
+    found = zip_name_locate(archive, entry.c_str(), 0) >= 0;
+    zip_discard(archive);
+  }
+  zip_error_fini(&error);
+  return found;
+}
+
 // The unit attribute of the package's root model, as written ("" when it states none, the millimetre).
 // lib3mf takes a unit it does not know for millimetres without a word (unit="parsec" read 1:1), so the
 // reader checks the attribute itself.
@@ -114,14 +131,29 @@ std::string rootModelEntry(std::span<const std::byte> bytes) {
 }
 
 // The value of attribute `name` in the tag text `tag` ("" when absent).
+// An attribute's value without the white space an XML schema number may have around it.
+std::string trimmed(const std::string& value) {
+  std::size_t first = 0, last = value.size();
+  while (first < last && std::isspace(static_cast<unsigned char>(value[first]))) ++first;
+  while (last > first && std::isspace(static_cast<unsigned char>(value[last - 1]))) --last;
+  return value.substr(first, last - first);
+}
+
+// (XML allows white space around the '='.)
 std::string attributeOf(std::string_view tag, std::string_view name) {
+  const auto space = [&](std::size_t i) {
+    return i < tag.size() && std::isspace(static_cast<unsigned char>(tag[i]));
+  };
   for (std::size_t at = tag.find(name); at != std::string_view::npos; at = tag.find(name, at + 1)) {
-    const std::size_t eq = at + name.size();
-    if (at == 0 || !std::isspace(static_cast<unsigned char>(tag[at - 1])) || eq + 1 >= tag.size() ||
-        tag[eq] != '=' || (tag[eq + 1] != '"' && tag[eq + 1] != '\''))
-      continue;
-    const std::size_t close = tag.find(tag[eq + 1], eq + 2);
-    if (close != std::string_view::npos) return std::string(tag.substr(eq + 2, close - eq - 2));
+    if (at == 0 || !space(at - 1)) continue;
+    std::size_t eq = at + name.size();
+    while (space(eq)) ++eq;
+    if (eq >= tag.size() || tag[eq] != '=') continue;
+    std::size_t quote = eq + 1;
+    while (space(quote)) ++quote;
+    if (quote >= tag.size() || (tag[quote] != '"' && tag[quote] != '\'')) continue;
+    const std::size_t close = tag.find(tag[quote], quote + 1);
+    if (close != std::string_view::npos) return std::string(tag.substr(quote + 1, close - quote - 1));
   }
   return "";
 }
@@ -132,6 +164,17 @@ std::string attributeOf(std::string_view tag, std::string_view name) {
 // when none is found.
 std::string modelPartProblem(std::span<const std::byte> bytes, bool readFailed) {
   const std::string entry = rootModelEntry(bytes);
+  if (readFailed) {  // a part the package's relationships name and it does not hold (lib3mf: "OPC Part")
+    const std::string rels = zipEntryText(bytes, "_rels/.rels", 1 << 16);
+    for (std::size_t t = rels.find("Target=\""); t != std::string::npos; t = rels.find("Target=\"", t + 1)) {
+      const std::size_t close = rels.find('"', t + 8);
+      if (close == std::string::npos) break;
+      std::string target = rels.substr(t + 8, close - t - 8);
+      if (!target.empty() && target[0] == '/') target.erase(0, 1);
+      if (!target.empty() && !zipHasEntry(bytes, target))
+        return "its relationships name the part /" + target + ", which the package does not hold";
+    }
+  }
   constexpr std::size_t kLimit = std::size_t{1} << 28;  // a larger part is not scanned
   const std::string model = zipEntryText(bytes, entry, kLimit);
   if (model.empty() || model.size() == kLimit) return "";
@@ -150,10 +193,10 @@ std::string modelPartProblem(std::span<const std::byte> bytes, bool readFailed) 
       // lib3mf reads a coordinate that is not a number ("abc", "1,5", "") as what it can of it, silently.
       const std::string_view tag = body.substr(v, body.find('>', v) - v);
       for (const char* axis : {"x", "y", "z"}) {
-        const std::string value = attributeOf(tag, axis);
+        const std::string value = attributeOf(tag, axis), number = trimmed(value);
         char* stop = nullptr;
-        std::strtod(value.c_str(), &stop);
-        if (value.empty() || stop == value.c_str() || *stop != '\0')
+        std::strtod(number.c_str(), &stop);
+        if (number.empty() || stop == number.c_str() || *stop != '\0')
           return "object " + id + ", vertex " + std::to_string(vertices) + ": " + axis + "=\"" + value +
                  "\" is not a number";
       }
@@ -165,10 +208,10 @@ std::string modelPartProblem(std::span<const std::byte> bytes, bool readFailed) 
       if (body.substr(t, 10) == "<triangles") continue;
       const std::string_view tag = body.substr(t, body.find('>', t) - t);
       for (const char* corner : {"v1", "v2", "v3"}) {
-        const std::string value = attributeOf(tag, corner);
+        const std::string value = attributeOf(tag, corner), number = trimmed(value);
         char* stop = nullptr;
-        const long long index = std::strtoll(value.c_str(), &stop, 10);
-        if (value.empty() || *stop != '\0' || index < 0 || static_cast<uint64_t>(index) >= vertices)
+        const long long index = std::strtoll(number.c_str(), &stop, 10);
+        if (number.empty() || *stop != '\0' || index < 0 || static_cast<uint64_t>(index) >= vertices)
           return "object " + id + ", triangle " + std::to_string(triangle) + ": " + corner + "=\"" + value +
                  "\" is no vertex of its mesh (it has " + std::to_string(vertices) + ")";
       }
