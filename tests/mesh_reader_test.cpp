@@ -623,21 +623,22 @@ TEST(MeshReader, ThreeMfComponentsExpandingPastTheFacetLimitAreRefused) {
 
 // Rewrites the model part of the 3MF package at `path` with `edit` (libzip, not lib3mf, which writes
 // only what it understands).
-void editThreeMfModel(const fs::path& path, const std::function<void(std::string&)>& edit) {
+void editThreeMfModel(const fs::path& path, const std::function<void(std::string&)>& edit,
+                      const char* part = "3D/3dmodel.model") {
   int err = 0;
   zip_t* zip = zip_open(path.c_str(), 0, &err);
   ASSERT_NE(zip, nullptr);
   zip_stat_t st;
   zip_stat_init(&st);
-  ASSERT_EQ(zip_stat(zip, "3D/3dmodel.model", 0, &st), 0);
+  ASSERT_EQ(zip_stat(zip, part, 0, &st), 0);
   std::string model(st.size, '\0');
-  zip_file_t* entry = zip_fopen(zip, "3D/3dmodel.model", 0);
+  zip_file_t* entry = zip_fopen(zip, part, 0);
   ASSERT_NE(entry, nullptr);
   ASSERT_EQ(zip_fread(entry, model.data(), st.size), static_cast<zip_int64_t>(st.size));
   zip_fclose(entry);
   edit(model);
   zip_source_t* source = zip_source_buffer(zip, model.data(), model.size(), 0);
-  ASSERT_GE(zip_file_add(zip, "3D/3dmodel.model", source, ZIP_FL_OVERWRITE), 0);
+  ASSERT_GE(zip_file_add(zip, part, source, ZIP_FL_OVERWRITE), 0);
   ASSERT_EQ(zip_close(zip), 0);
 }
 
@@ -695,6 +696,24 @@ TEST(MeshReader, ThreeMfBrokenModelPartsAreNamed) {
   const FacetSoup spaced = readMesh(dir / "spaced.3mf");
   ASSERT_EQ(spaced.corners.size(), plain.corners.size());
   EXPECT_EQ(std::memcmp(spaced.corners.data(), plain.corners.data(), plain.corners.size() * sizeof(Point3f)),
+            0);
+  // A relationship to a part the package does not hold (PrusaSlicer's headless export names a thumbnail
+  // it leaves out; lib3mf refused the package: "Could not create OPC Part"): the model is read all the same.
+  writeThreeMfCube(dir / "thumb.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
+  editThreeMfModel(
+      dir / "thumb.3mf",
+      [](std::string& rels) {
+        const std::size_t end = rels.rfind("</Relationships>");
+        ASSERT_NE(end, std::string::npos) << rels;
+        rels.insert(end,
+                    "<Relationship Target=\"/Metadata/thumbnail.png\" Id=\"rel-2\" "
+                    "Type=\"http://schemas.openxmlformats.org/package/2006/relationships/metadata/"
+                    "thumbnail\"/>");
+      },
+      "_rels/.rels");
+  const FacetSoup thumb = readMesh(dir / "thumb.3mf");
+  ASSERT_EQ(thumb.corners.size(), plain.corners.size());
+  EXPECT_EQ(std::memcmp(thumb.corners.data(), plain.corners.data(), plain.corners.size() * sizeof(Point3f)),
             0);
   // A coordinate that is not a number, which lib3mf reads as what it can of it (0, or 1 of "1,5").
   for (const char* value : {"abc", "1,5", ""}) {

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <map>
 #include <optional>
@@ -106,6 +107,72 @@ bool zipHasEntry(std::span<const std::byte> bytes, const std::string& entry) {
   }
   zip_error_fini(&error);
   return found;
+}
+
+// The package without the relationships of _rels/.rels whose target part it does not hold, other than
+// the root model's (PrusaSlicer's headless export names a thumbnail it leaves out, and lib3mf then
+// refuses the whole package: "Could not create OPC Part"). Empty when nothing is missing or the
+// package cannot be rewritten; a thumbnail is no part of the model.
+std::vector<std::byte> withoutMissingParts(std::span<const std::byte> bytes, const std::string& root) {
+  const std::string rels = zipEntryText(bytes, "_rels/.rels", 1 << 16);
+  std::string kept = rels;
+  bool removed = false;
+  for (std::size_t t = kept.find("Target=\""); t != std::string::npos; t = kept.find("Target=\"", t + 1)) {
+    const std::size_t close = kept.find('"', t + 8);
+    if (close == std::string::npos) break;
+    std::string target = kept.substr(t + 8, close - t - 8);
+    if (!target.empty() && target[0] == '/') target.erase(0, 1);
+    if (target.empty() || target == root || zipHasEntry(bytes, target)) continue;
+    const std::size_t begin = kept.rfind('<', t), end = kept.find('>', t);
+    if (begin == std::string::npos || end == std::string::npos) return {};
+    kept.erase(begin, end + 1 - begin);
+    removed = true;
+    t = begin;
+  }
+  if (!removed) return {};
+  // The copy is libzip's to free (freep 1): its buffer source frees the data it started from when a
+  // write is committed, even with freep 0 (libzip 1.7), which freed a vector's storage under it.
+  void* copy = std::malloc(bytes.size());
+  if (copy == nullptr) return {};
+  std::memcpy(copy, bytes.data(), bytes.size());
+  zip_error_t error;
+  zip_error_init(&error);
+  std::vector<std::byte> out;
+  zip_source_t* source = zip_source_buffer_create(copy, bytes.size(), 1, &error);
+  if (source == nullptr) std::free(copy);
+  zip_t* archive = source != nullptr ? zip_open_from_source(source, 0, &error) : nullptr;
+  if (archive == nullptr) {
+    if (source != nullptr) zip_source_free(source);
+    zip_error_fini(&error);
+    return out;
+  }
+  zip_source_keep(source);  // the archive's close writes the new package into it
+  zip_source_t* relsSource = zip_source_buffer(archive, kept.data(), kept.size(), 0);
+  bool written = false;
+  if (relsSource != nullptr) {
+    if (zip_file_add(archive, "_rels/.rels", relsSource, ZIP_FL_OVERWRITE) < 0)
+      zip_source_free(relsSource);
+    else
+      written = zip_close(archive) == 0;
+  }
+  if (!written) {
+    zip_discard(archive);
+    zip_source_free(source);
+    zip_error_fini(&error);
+    return out;
+  }
+  zip_stat_t st;
+  zip_stat_init(&st);
+  if (zip_source_open(source) == 0) {
+    if (zip_source_stat(source, &st) == 0 && (st.valid & ZIP_STAT_SIZE)) {
+      out.resize(st.size);
+      if (zip_source_read(source, out.data(), st.size) != static_cast<zip_int64_t>(st.size)) out.clear();
+    }
+    zip_source_close(source);
+  }
+  zip_source_free(source);
+  zip_error_fini(&error);
+  return out;
 }
 
 // The unit attribute of the package's root model, as written ("" when it states none, the millimetre).
@@ -483,7 +550,8 @@ FacetSoup parseThreeMf(std::span<const std::byte> bytes, const std::string& name
   ThreeMfSource& out = source ? *source : local;
   out = ThreeMfSource{};
   FacetSoup soup;
-  Reader(name, factor, out, soup).read(bytes);
+  const std::vector<std::byte> repaired = withoutMissingParts(bytes, rootModelEntry(bytes));
+  Reader(name, factor, out, soup).read(repaired.empty() ? bytes : std::span<const std::byte>(repaired));
   return soup;
 }
 
