@@ -572,6 +572,27 @@ bool fileLooksWhole(const std::filesystem::path& path, const std::string& ext) {
 
 }  // namespace
 
+void MadeFolders::note(const std::filesystem::path& folder) {
+  if (folder.empty()) return;
+  std::filesystem::path outermost;
+  for (std::filesystem::path p = std::filesystem::absolute(folder).lexically_normal();
+       !p.empty() && !outputPathExists(p) && p != p.parent_path(); p = p.parent_path())
+    outermost = p;
+  if (!outermost.empty() && std::find(made_.begin(), made_.end(), outermost) == made_.end())
+    made_.push_back(outermost);
+}
+
+void MadeFolders::removeEmpty() const noexcept {
+  for (const std::filesystem::path& folder : made_) {
+    std::error_code ec;
+    bool empty = true;  // of files: folders only
+    for (auto it = std::filesystem::recursive_directory_iterator(folder, ec);
+         empty && !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
+      empty = it->is_directory();
+    if (empty && !ec) std::filesystem::remove_all(folder, ec);
+  }
+}
+
 bool outputLooksWhole(const std::filesystem::path& path, std::string_view layerExt) {
   namespace fs = std::filesystem;
   std::error_code ec;

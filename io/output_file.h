@@ -153,6 +153,18 @@ enum class OutputKind { File, LayerFolder };
 // missing path is fine.
 void checkReplaceable(const std::filesystem::path& path, OutputKind kind, std::string_view layerExt = {});
 
+// Folders a job makes for its outputs, taken away again when it fails: `note(folder)` before making
+// `folder` records the outermost of its ancestors that does not exist yet; `removeEmpty()` removes each
+// recorded folder that holds no file (folders only), as a failed job leaves none of its outputs.
+class MadeFolders {
+ public:
+  void note(const std::filesystem::path& folder);
+  void removeEmpty() const noexcept;
+
+ private:
+  std::vector<std::filesystem::path> made_;
+};
+
 // Whether an existing output at `path` (one that checkReplaceable finds toposlice's) is whole as far as
 // its format tells: a file not empty and ending as a complete one does (a zip with toposlice's comment,
 // an SVG's </svg>, a PNG's IEND chunk, a GOO's ending string, an ASCII CLI's $$GEOMETRYEND, a report's

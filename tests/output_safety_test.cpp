@@ -168,6 +168,21 @@ TEST_F(OutputSafety, BatchShowsEachVariantsWarningsEvenWhenQuiet) {
   EXPECT_TRUE(contains(r.err, "outside the model's height")) << r.describe();
 }
 
+// A batch makes the folders its variants write into; those that end without a file (every variant there
+// failed) are taken away again, as a failed job leaves none of its outputs. Folders with results stay.
+TEST_F(OutputSafety, BatchRemovesTheEmptyFoldersItMade) {
+  writeBytes(path("box.stl"), boxStl(5, 0, false));
+  writeBytes(path("bad.stl"), "solid nothing\nendsolid nothing\n");
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": \"box.stl\"}, \"settings\": {\"layer_height\": 1},"
+             " \"variants\": [{\"name\": \"ok\", \"model\": \"box.stl\", \"contours\": \"good/a.cli\"},"
+             " {\"name\": \"bad\", \"model\": \"bad.stl\", \"contours\": \"made/deep/b.cli\"}]}");
+  const RunResult r = run({"batch", "job.json", "-q"});
+  EXPECT_EQ(r.code(), 1) << r.describe();
+  EXPECT_TRUE(fs::exists(path("good/a.cli")));
+  EXPECT_FALSE(fs::exists(path("made"))) << "the failed variant's folders stayed";
+}
+
 // Masks with no image size anywhere in the job: refused when the job is read, naming its keys (it was
 // found per variant, after the earlier variants were sliced, naming slice's --printer).
 TEST_F(OutputSafety, BatchMasksWithoutAnImageAreRefusedFirst) {

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "io/jobs/batch_job.h"
+#include "io/output_file.h"
 #include "parallel/parallel.h"
 #include "tools/batch_plan.h"
 #include "tools/progress_bar.h"
@@ -78,6 +79,11 @@ int runBatch(const std::filesystem::path& jobPath, const BatchRunOptions& option
   const std::size_t inFlight = std::max<std::size_t>(
       1, std::min({count, std::size_t{ThreadLimit::available()}, kMaxVariantsInFlight}));
   std::vector<BatchOutcome> outcomes(count);
+  // The folders the variants' outputs go into that this run makes: those left without a file at the end
+  // (every variant there failed, or the run was stopped) are taken away again.
+  MadeFolders made;
+  for (const BatchVariant& v : job.variants)
+    for (const auto& p : batchVariantOutputs(v)) made.note(p.parent_path());
   std::optional<BatchProgress> progress(std::in_place, count, options.quiet);
   orderedPipeline(
       count, inFlight,
@@ -95,6 +101,7 @@ int runBatch(const std::filesystem::path& jobPath, const BatchRunOptions& option
         progress->finished(true);
       },
       [](std::size_t, std::size_t) {});
+  made.removeEmpty();
 
   progress.reset();  // the bar's line ends before the table and the messages below
   const double total = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

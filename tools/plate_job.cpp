@@ -914,19 +914,10 @@ int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
   // The folder the user named for the outputs (-O, as `plate job.json -O out` in the README) and those
   // of the job's outputs are made when missing (the latter by runPlateJob). A failed job takes the
   // folders it made away again (they hold nothing then).
-  std::vector<std::filesystem::path> made;  // the outermost folders this run creates
-  const auto outermostMissing = [&made](const std::filesystem::path& folder) {
-    std::filesystem::path outermost;
-    for (std::filesystem::path p = std::filesystem::absolute(folder).lexically_normal();
-         !p.empty() && !outputPathExists(p) && p != p.parent_path(); p = p.parent_path())
-      outermost = p;
-    if (!outermost.empty() && std::find(made.begin(), made.end(), outermost) == made.end())
-      made.push_back(outermost);
-  };
-  if (!outputDir.empty()) outermostMissing(outputDir);
-  forEachPlateOutput(job, 0, 1, [&](const std::filesystem::path& path, bool) {
-    if (!path.parent_path().empty()) outermostMissing(path.parent_path());
-  });
+  MadeFolders made;
+  made.note(outputDir);
+  forEachPlateOutput(job, 0, 1,
+                     [&](const std::filesystem::path& path, bool) { made.note(path.parent_path()); });
   if (!outputDir.empty()) {
     std::error_code ec;
     std::filesystem::create_directories(outputDir, ec);
@@ -943,14 +934,7 @@ int runPlateCommand(const std::filesystem::path& jobPath, bool quiet,
       bar.setLabel("plate " + std::to_string(plate + 1) + "/" + std::to_string(plates) + " layers");
     });
   } catch (...) {
-    for (const std::filesystem::path& folder : made) {
-      std::error_code ec;
-      bool empty = true;  // of files: folders only
-      for (auto it = std::filesystem::recursive_directory_iterator(folder, ec);
-           empty && !ec && it != std::filesystem::recursive_directory_iterator(); it.increment(ec))
-        empty = it->is_directory();
-      if (empty && !ec) std::filesystem::remove_all(folder, ec);
-    }
+    made.removeEmpty();
     throw;
   }
   for (const auto& w : r.warnings) std::fprintf(stderr, "toposlice: warning: %s\n", w.c_str());  // even -q
