@@ -535,36 +535,46 @@ bool fileLooksWhole(const std::filesystem::path& path, const std::string& ext) {
   if (ext == ".csv") return endsWith("\n"sv);
   if (ext == ".json") return endsWith("}\n"sv);
   if (ext == ".cli") {  // an ASCII one ends with its geometry; a binary one holds its header's layers
-    std::ifstream in(path, std::ios::binary);
-    const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    const std::size_t end = bytes.find("$$HEADEREND"sv);
-    if (end == std::string::npos) return false;
-    const std::string_view header = std::string_view(bytes).substr(0, end);
-    if (header.find("$$ASCII"sv) != std::string_view::npos) return endsWith("$$GEOMETRYEND\n"sv);
-    const std::size_t count = header.find("$$LAYERS/"sv);
-    if (count == std::string_view::npos) return false;
-    const uint64_t layers = std::strtoull(bytes.c_str() + count + 9, nullptr, 10);
-    // Commands: uint16 127 (a layer: float32 z) or 130 (a polyline: int32 id, dir, n, n float32 pairs).
-    uint64_t seen = 0;
-    for (std::size_t at = end + 11; at < bytes.size();) {
-      if (at + 2 > bytes.size()) return false;
-      const auto command =
-          static_cast<uint16_t>(static_cast<uint8_t>(bytes[at]) | static_cast<uint8_t>(bytes[at + 1]) << 8);
-      at += 2;
-      if (command == 127) {
-        at += 4;
-        ++seen;
-      } else if (command == 130) {
-        if (at + 12 > bytes.size()) return false;
-        uint32_t n = 0;
-        std::memcpy(&n, bytes.data() + at + 8, 4);
-        at += 12 + std::size_t{8} * n;
-      } else {
-        return false;
-      }
-      if (at > bytes.size()) return false;
+    // The header (a few hundred bytes), then only the commands' heads: a polyline's points are skipped,
+    // not read (a 1 um stack is hundreds of megabytes).
+    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) return false;
+    struct stat st {};
+    std::string head(std::size_t{1} << 16, '\0');  // a header with many feature labels too
+    const ssize_t got = ::fstat(fd, &st) == 0 ? ::pread(fd, head.data(), head.size(), 0) : -1;
+    const std::string_view text(head.data(), got > 0 ? static_cast<std::size_t>(got) : 0);
+    const std::size_t end = text.find("$$HEADEREND"sv);
+    const std::size_t count = text.find("$$LAYERS/"sv);
+    if (end == std::string_view::npos || text.substr(0, end).find("$$ASCII"sv) != std::string_view::npos ||
+        count == std::string_view::npos || count > end) {
+      ::close(fd);
+      return end != std::string_view::npos && endsWith("$$GEOMETRYEND\n"sv);
     }
-    return seen == layers;
+    const uint64_t layers = std::strtoull(std::string(text.substr(count + 9, 20)).c_str(), nullptr, 10);
+    // Commands: uint16 127 (a layer: float32 z) or 130 (a polyline: int32 id, dir, n, n float32 pairs).
+    const auto size = static_cast<uint64_t>(st.st_size);
+    uint64_t seen = 0, at = end + 11;
+    bool whole = true;
+    while (whole && at < size) {
+      unsigned char command[14];
+      const std::size_t want = static_cast<std::size_t>(std::min<uint64_t>(sizeof command, size - at));
+      whole = want >= 2 && ::pread(fd, command, want, static_cast<off_t>(at)) == static_cast<ssize_t>(want);
+      if (!whole) break;
+      const unsigned id = command[0] | command[1] << 8;
+      if (id == 127) {
+        at += 6;
+        ++seen;
+      } else if (id == 130 && want == sizeof command) {
+        uint32_t n = 0;
+        std::memcpy(&n, command + 10, 4);
+        at += 14 + uint64_t{8} * n;
+      } else {
+        whole = false;
+      }
+      whole = whole && at <= size;
+    }
+    ::close(fd);
+    return whole && seen == layers;
   }
   if (ext == ".exr") return exrShape(path, "").whole;
   return true;  // .vdb, .topo: not empty

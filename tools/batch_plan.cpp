@@ -38,8 +38,8 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
       if (const auto mismatch = checkVariantConnectivityParallel(soup.corners, t.table.adjacency)) {
         // The model's table with every facet reversed (built with the other "fix_orientation" from an
         // inside-out model) is its table all the same: the variants are checked against both.
-        std::vector<int32_t> reversed(t.table.adjacency.begin(), t.table.adjacency.end());
-        for (std::size_t e = 0; e + 2 < reversed.size(); e += 3) std::swap(reversed[e + 1], reversed[e + 2]);
+        std::vector<int32_t> reversed;
+        reverseFacetsOfTable(t.table.adjacency, reversed);
         if (checkVariantConnectivityParallel(soup.corners, reversed)) {
           std::string why = mismatch->reason;  // the check's words are a variant's and a template's
           for (const auto& [from, to] : {std::pair<std::string, std::string>{"the variant", "the model"},

@@ -99,13 +99,7 @@ std::span<const int32_t> modelTopology(const std::filesystem::path& model, const
     // Every facet the template's reversed (an inside-out variant flipped by --fix-orientation, or one
     // against a template that was flipped): corners 1 and 2 swapped, so edges 1 and 2 (each opposite
     // its corner) trade places and the table with those entries swapped describes it.
-    const std::span<const int32_t> given = table.adjacency;
-    built.resize(given.size());
-    for (std::size_t e = 0; e + 2 < given.size(); e += 3) {
-      built[e] = given[e];
-      built[e + 1] = given[e + 2];
-      built[e + 2] = given[e + 1];
-    }
+    reverseFacetsOfTable(table.adjacency, built);
     if (!checkVariantConnectivityParallel(soup.corners, built)) {
       result.topology = "loaded from template, every facet reversed (connectivity verified)";
       return built;

@@ -13,6 +13,8 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "core/mesh/mesh.h"
 
@@ -28,6 +30,14 @@ struct VariantMismatch {
   uint32_t neighbour = kNoIndex;  // the entry's value k
   std::string reason;
 };
+
+// The table of the same mesh with every facet reversed (corners 1 and 2 swapped, as flipping an
+// inside-out mesh does): entries 1 and 2 of each facet trade places, each edge being opposite its corner.
+// Written into `out` (resized).
+inline void reverseFacetsOfTable(std::span<const int32_t> adjacency, std::vector<int32_t>& out) {
+  out.assign(adjacency.begin(), adjacency.end());
+  for (std::size_t e = 0; e + 2 < out.size(); e += 3) std::swap(out[e + 1], out[e + 2]);
+}
 
 // Checks the variant soup `corners` (3 per facet) against a template table (3 entries per facet) in
 // linear time, each neighbouring pair once, from its lower facet index i < k. Returns nullopt when every
