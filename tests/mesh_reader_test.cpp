@@ -660,6 +660,44 @@ TEST(MeshReader, ThreeMfUnknownUnitIsRefused) {
   }
 }
 
+// A package whose model requires an extension toposlice does not honour (its geometry in beams, or a mesh
+// that stands in for slices) is refused naming it; lib3mf read both as plain meshes. The extensions that
+// carry no geometry toposlice would lose (materials) or that it reads (production) are accepted.
+TEST(MeshReader, ThreeMfUnsupportedRequiredExtensionIsRefused) {
+  fixtures::ScratchDir dir;
+  const std::string beam = "http://schemas.microsoft.com/3dmanufacturing/beamlattice/2017/02";
+  const std::string slice = "http://schemas.microsoft.com/3dmanufacturing/slice/2015/07";
+  const std::string other = "http://example.com/3dmanufacturing/unknown/2030/01";
+  const std::string production = "http://schemas.microsoft.com/3dmanufacturing/production/2015/06";
+  const std::string material = "http://schemas.microsoft.com/3dmanufacturing/material/2015/02";
+  const auto require = [&](const std::string& declarations, const std::string& required) {
+    writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
+    editThreeMfModel(dir / "cube.3mf", [&](std::string& model) {
+      const std::size_t tag = model.find("<model ");
+      ASSERT_NE(tag, std::string::npos) << model.substr(0, 300);
+      model.insert(tag + 7, declarations + " requiredextensions=\"" + required + "\" ");
+    });
+  };
+  const auto refusal = [&](const std::string& declarations, const std::string& required) {
+    require(declarations, required);
+    return errorOf([&] { readMesh(dir / "cube.3mf"); });
+  };
+  const std::string name = (dir / "cube.3mf").string();
+  EXPECT_EQ(refusal("xmlns:b=\"" + beam + "\"", "b"), name + ": its model requires the 3MF extension " +
+                                                          beam +
+                                                          " (beam lattices), which toposlice does not read");
+  EXPECT_EQ(
+      refusal("xmlns:p='" + production + "' xmlns:s=\"" + slice + "\"", " p  s "),
+      name + ": its model requires the 3MF extension " + slice +
+          " (slice stacks; its mesh may be only a low-resolution stand-in), which toposlice does not read");
+  EXPECT_EQ(refusal("xmlns:q=\"" + other + "\"", "q"),
+            name + ": its model requires the 3MF extension " + other +
+                " (an extension toposlice does not know), which toposlice does not read");
+  // Read: the cube's 12 facets.
+  require("xmlns:p=\"" + production + "\" xmlns:m=\"" + material + "\"", "p m");
+  EXPECT_EQ(readMesh(dir / "cube.3mf").facetCount(), 12u);
+}
+
 // lib3mf's messages name no element: a model part cut short read as "contains no facets", a triangle
 // naming a vertex its mesh lacks as "Invalid model node index". Both are said as they are.
 TEST(MeshReader, ThreeMfBrokenModelPartsAreNamed) {

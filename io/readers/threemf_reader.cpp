@@ -1,5 +1,6 @@
 #include "io/readers/threemf_reader.h"
 
+#include <algorithm>
 #include <array>
 #include <cctype>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include <zip.h>
@@ -175,9 +177,6 @@ std::vector<std::byte> withoutMissingParts(std::span<const std::byte> bytes, con
   return out;
 }
 
-// The unit attribute of the package's root model, as written ("" when it states none, the millimetre).
-// lib3mf takes a unit it does not know for millimetres without a word (unit="parsec" read 1:1), so the
-// reader checks the attribute itself.
 // The zip entry of the package's root model part, as its relationship names it.
 std::string rootModelEntry(std::span<const std::byte> bytes) {
   std::string root = "3D/3dmodel.model";
@@ -197,7 +196,6 @@ std::string rootModelEntry(std::span<const std::byte> bytes) {
   return root;
 }
 
-// The value of attribute `name` in the tag text `tag` ("" when absent).
 // An attribute's value without the white space an XML schema number may have around it.
 std::string trimmed(const std::string& value) {
   std::size_t first = 0, last = value.size();
@@ -206,7 +204,8 @@ std::string trimmed(const std::string& value) {
   return value.substr(first, last - first);
 }
 
-// (XML allows white space around the '='.)
+// The value of attribute `name` in the tag text `tag` ("" when absent). (XML allows white space around the
+// '='.)
 std::string attributeOf(std::string_view tag, std::string_view name) {
   const auto space = [&](std::size_t i) {
     return i < tag.size() && std::isspace(static_cast<unsigned char>(tag[i]));
@@ -288,12 +287,61 @@ std::string modelPartProblem(std::span<const std::byte> bytes, bool readFailed) 
   return "";
 }
 
-std::optional<std::string> statedUnit(std::span<const std::byte> bytes) {
-  const std::string root = rootModelEntry(bytes);
-  const std::string model = zipEntryText(bytes, root, 1 << 16);  // the <model> tag opens the part
+// The start tag of the package's root model (`<model ...`, without its '>'); nullopt when the part does
+// not open with one within its first 64 KiB.
+std::optional<std::string> modelStartTag(std::span<const std::byte> bytes) {
+  const std::string model = zipEntryText(bytes, rootModelEntry(bytes), 1 << 16);
   const std::size_t tag = model.find("<model");
   if (tag == std::string::npos) return std::nullopt;
-  const std::string start = model.substr(tag, model.find('>', tag) - tag);
+  return model.substr(tag, model.find('>', tag) - tag);
+}
+
+// The first extension the root model lists in `requiredextensions` that this reader cannot honour, as
+// "<namespace> (<what it holds>)"; "" when there is none. A consumer must not process a package whose
+// required extensions it does not support (3MF Core Specification, "requiredextensions"): lib3mf reads
+// beam lattices and slice stacks, but toposlice takes only the meshes, so a model whose geometry lies in
+// beams, or whose mesh is a low-resolution stand-in for its slices, would be sliced wrong without a
+// word. Materials and colours (no geometry) and the production extension (parts, components) are read.
+std::string unsupportedRequiredExtension(const std::string& modelTag) {
+  static constexpr std::string_view kRead[] = {
+      "http://schemas.microsoft.com/3dmanufacturing/core/2015/02",
+      "http://schemas.microsoft.com/3dmanufacturing/material/2015/02",
+      "http://schemas.microsoft.com/3dmanufacturing/production/2015/06",
+  };
+  static constexpr std::pair<std::string_view, std::string_view> kKnown[] = {
+      {"beamlattice", "beam lattices"},
+      {"slice", "slice stacks; its mesh may be only a low-resolution stand-in"},
+      {"securecontent", "encrypted parts"},
+      {"volumetric", "volumetric data"},
+      {"displacement", "displacement maps"},
+      {"booleanoperations", "boolean shapes"},
+  };
+  const std::string required = attributeOf(modelTag, "requiredextensions");
+  std::size_t at = 0;
+  while (at < required.size()) {
+    while (at < required.size() && std::isspace(static_cast<unsigned char>(required[at]))) ++at;
+    std::size_t end = at;
+    while (end < required.size() && !std::isspace(static_cast<unsigned char>(required[end]))) ++end;
+    if (end == at) break;
+    const std::string prefix = required.substr(at, end - at);
+    at = end;
+    const std::string space = attributeOf(modelTag, "xmlns:" + prefix);
+    if (std::find(std::begin(kRead), std::end(kRead), space) != std::end(kRead)) continue;
+    std::string what = "an extension toposlice does not know";
+    for (const auto& [name, holds] : kKnown)
+      if (space.find("/3dmanufacturing/" + std::string(name) + "/") != std::string::npos) what = holds;
+    return (space.empty() ? "prefix '" + prefix + "'" : space) + " (" + what + ")";
+  }
+  return "";
+}
+
+// The unit attribute of the package's root model, as written ("" when it states none, the millimetre).
+// lib3mf takes a unit it does not know for millimetres without a word (unit="parsec" read 1:1), so the
+// reader checks the attribute itself.
+std::optional<std::string> statedUnit(std::span<const std::byte> bytes) {
+  const std::optional<std::string> tag = modelStartTag(bytes);
+  if (!tag) return std::nullopt;
+  const std::string& start = *tag;
   const std::size_t unit = start.find(" unit=");
   if (unit == std::string::npos || unit + 7 > start.size()) return std::nullopt;
   const char quote = start[unit + 6];
@@ -321,6 +369,10 @@ class Reader {
     // What lib3mf lets through (a coordinate that is not a number) or reads as nothing.
     if (const std::string problem = modelPartProblem(bytes, false); !problem.empty())
       throwInputError(name_, "not a valid 3MF file: " + problem);
+    if (const std::optional<std::string> tag = modelStartTag(bytes))
+      if (const std::string extension = unsupportedRequiredExtension(*tag); !extension.empty())
+        throwInputError(
+            name_, "its model requires the 3MF extension " + extension + ", which toposlice does not read");
     DWORD unit = 0;
     check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
     setUnit(unit);
