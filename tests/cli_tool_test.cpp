@@ -1092,6 +1092,25 @@ TEST_F(CliToolFeatures, ContourOnlyAreaIsTheSolidRegions) {
   EXPECT_TRUE(contains(readBytes(path("m.csv")), "0,0.500000,140.000000,")) << readBytes(path("m.csv"));
 }
 
+// The same for a model whose own shells intersect (neighbouring teeth of a dental arch, a part joined by
+// placing one box into another): their common part counts once, as the masks light it, where the signed
+// areas' sum said 100 + 100 + 50 = 250 here. A disjoint island beside them counts as it is.
+TEST_F(CliToolFeatures, ContourOnlyAreaCountsIntersectingShellsOnce) {
+  FacetSoup model = fixtures::box(0, 0, 0, 10, 10, 2);
+  for (const FacetSoup& shell : {fixtures::box(5, 5, 0, 15, 15, 2), fixtures::box(20, 0, 0, 25, 10, 2)})
+    model.corners.insert(model.corners.end(), shell.corners.begin(), shell.corners.end());
+  writeBinaryStl(path("model.stl"), model, "model", false);
+  const RunResult r = run({"slice", "model.stl", "-H", "1", "-o", "a.cli", "--report", "a.csv", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  const std::string csv = readBytes(path("a.csv"));
+  EXPECT_TRUE(contains(csv, "0,0.500000,225.000000,")) << csv;
+  EXPECT_TRUE(contains(csv, "1,1.500000,225.000000,")) << csv;
+  const RunResult m = run({"slice", "model.stl", "-H", "1", "--masks", "m", "--pixel", "0.1", "--resolution",
+                           "300x200", "--report", "m.csv", "-q"});
+  ASSERT_EQ(m.code(), 0) << m.describe();
+  EXPECT_TRUE(contains(readBytes(path("m.csv")), "0,0.500000,225.000000,")) << readBytes(path("m.csv"));
+}
+
 TEST_F(CliToolFeatures, AddOnsLightMorePixelsAndEngravingsFewer) {
   const std::string aligner = sharedModel("derived/aligner_upper_case0.stl.gz").string();
   const std::string monogram = sharedModel("derived/monogram_A1_on_aligner.stl").string();

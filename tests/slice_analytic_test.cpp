@@ -5,6 +5,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/slicing/contours.h"
 #include "core/slicing/planes.h"
 #include "tests/fixtures/models.h"
 #include "tests/fixtures/shapes.h"
@@ -39,6 +40,30 @@ std::vector<LayerContours> sliceAllMethods(const FacetSoup& soup, const std::vec
       EXPECT_TRUE(layers == reference) << sliceMethodName(method) << " differs from cp";
   }
   return reference;
+}
+
+// Outer loops whose boxes overlap (intersecting shells, or an island inside another's hole) may count a
+// region twice in the signed area; disjoint islands and an outer loop with its hole do not.
+TEST(SliceAnalytic, OuterLoopsMayOverlapOnlyWhenTheirBoxesDo) {
+  const auto square = [](LayerContours& layer, double x0, double y0, double size, bool hole) {
+    const Point2d corners[4] = {{x0, y0}, {x0 + size, y0}, {x0 + size, y0 + size}, {x0, y0 + size}};
+    for (int i = 0; i < 4; ++i) layer.addPoint(corners[hole ? 3 - i : i], 0);
+    layer.endLoop(true);
+  };
+  LayerContours layer;
+  square(layer, 0, 0, 10, false);
+  EXPECT_FALSE(outerLoopsMayOverlap(layer));
+  square(layer, 2, 2, 6, true);     // its hole
+  square(layer, 20, 0, 10, false);  // an island beside it, touching no box
+  square(layer, 0, 20, 10, false);  // above it
+  EXPECT_FALSE(outerLoopsMayOverlap(layer));
+  square(layer, 25, 5, 10, false);  // into the island beside
+  EXPECT_TRUE(outerLoopsMayOverlap(layer));
+  layer.clear(0);
+  square(layer, 0, 0, 10, false);
+  square(layer, 2, 2, 6, true);
+  square(layer, 3, 3, 4, false);  // an island in the hole: its box overlaps the outer loop's
+  EXPECT_TRUE(outerLoopsMayOverlap(layer));
 }
 
 TEST(SliceAnalytic, BoxLayersAreOneCounterClockwiseRectangle) {

@@ -409,14 +409,15 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     }
     s.sets.clear();
     for (std::size_t i = 0; i < layer.size(); ++i) s.sets.push_back({&r.moved[i], signs[i]});
-    // A part's area: its model's signed area, or with features in the layer the area of the solid
-    // region they make under the positive rule, as the masks light it (an add-on over the model counts
-    // once, a removal reaching out of it takes nothing there), as slice's report takes it.
+    // A part's area: its model's signed area, or with features in the layer (or outer loops of its own
+    // that may overlap) the area of the solid region they make under the positive rule, as the masks
+    // light it (an add-on over the model counts once, a removal reaching out of it takes nothing there,
+    // intersecting shells count their common part once), as slice's report takes it.
     for (std::size_t m = 0; m < partCount; ++m) {
       const std::size_t first = partStart[m], end = m + 1 < partCount ? partStart[m + 1] : layer.size();
       bool features = false;
       for (std::size_t i = first + 1; i < end; ++i) features = features || r.moved[i].loopCount() > 0;
-      if (!features) {
+      if (!features && !outerLoopsMayOverlap(r.moved[first])) {
         r.partArea[m] = signs[first] * layerSignedArea(r.moved[first]);
         continue;
       }

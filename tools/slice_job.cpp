@@ -933,11 +933,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     }
     if (!masks) {
       r.area = modelArea;  // layerSignedArea(layer[0]), without a second pass
-      // With features, the solid region under the positive rule, as the masks light it: an add-on over
-      // the model counts once, a removal reaching out of it takes nothing there (the signed areas'
-      // sum counted both, off by 0.5 % on the aligner's monogram layers).
+      // With features, or outer loops that may overlap, the solid region under the positive rule, as
+      // the masks light it: an add-on over the model counts once, a removal reaching out of it takes
+      // nothing there (the signed areas' sum counted both, off by 0.5 % on the aligner's monogram
+      // layers), and where two shells of the model intersect their common part counts once.
       if (std::any_of(layer.begin() + 1, layer.end(),
-                      [](const LayerContours& f) { return f.loopCount() > 0; })) {
+                      [](const LayerContours& f) { return f.loopCount() > 0; }) ||
+          outerLoopsMayOverlap(layer[0])) {
         s.sets.clear();
         for (std::size_t i = 0; i < layer.size(); ++i)
           s.sets.push_back({&layer[i], i == 0 || i <= addCount ? 1 : -1});

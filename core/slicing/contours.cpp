@@ -69,4 +69,29 @@ double layerSignedArea(const LayerContours& layer) {
   return area;
 }
 
+bool outerLoopsMayOverlap(const LayerContours& layer) {
+  if (layer.loopCount() < 2) return false;
+  struct Box {
+    double x0, x1, y0, y1;
+  };
+  std::vector<Box> boxes;
+  for (std::size_t l = 0; l < layer.loopCount(); ++l) {
+    const std::span<const Point2d> loop = layer.loopPoints(l);
+    if (signedArea(loop) <= 0) continue;
+    Box b{loop[0].x, loop[0].x, loop[0].y, loop[0].y};
+    for (const Point2d& p : loop) {
+      b.x0 = std::min(b.x0, p.x);
+      b.x1 = std::max(b.x1, p.x);
+      b.y0 = std::min(b.y0, p.y);
+      b.y1 = std::max(b.y1, p.y);
+    }
+    boxes.push_back(b);
+  }
+  std::sort(boxes.begin(), boxes.end(), [](const Box& a, const Box& b) { return a.x0 < b.x0; });
+  for (std::size_t i = 0; i < boxes.size(); ++i)
+    for (std::size_t j = i + 1; j < boxes.size() && boxes[j].x0 < boxes[i].x1; ++j)
+      if (boxes[j].y0 < boxes[i].y1 && boxes[i].y0 < boxes[j].y1) return true;
+  return false;
+}
+
 }  // namespace toposlice

@@ -71,4 +71,10 @@ double signedArea(std::span<const Point2d> loop);
 // properly nested, non-overlapping loops).
 double layerSignedArea(const LayerContours& layer);
 
+// Whether two of the layer's counter-clockwise (outer) loops have overlapping bounding boxes. Only then
+// can the signed area count a region twice (shells of one model that intersect: overlapping teeth, or
+// two parts joined by placing one into the other), so only then does the solid area need the union
+// under the positive rule. False for disjoint islands and for a single outer loop with its holes.
+bool outerLoopsMayOverlap(const LayerContours& layer);
+
 }  // namespace toposlice
