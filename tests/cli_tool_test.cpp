@@ -294,6 +294,20 @@ TEST_F(CliToolSliceErrors, UnknownOutputExtensionIsRefused) {
   expectNoTemporaries();
 }
 
+// -o and --contours name the same outputs, in any mix: the last option's values replaced the others
+// (-o a.cli --contours b.svg wrote only b.svg, exit 0).
+TEST_F(CliToolSliceErrors, OutputAndContoursOptionsAddUp) {
+  const RunResult r = run({"slice", examplePart().string(), "--layers", "3", "-o", "a.cli", "--contours",
+                           "b.svg", "-o", "c.3mf", "-q"});
+  ASSERT_EQ(r.code(), 0) << r.describe();
+  for (const char* name : {"a.cli", "b.svg", "c.3mf"}) EXPECT_TRUE(fs::exists(path(name))) << name;
+  // Together they are one list: the same path through both is one output named twice.
+  const RunResult twice =
+      run({"slice", examplePart().string(), "--layers", "3", "-o", "d.cli", "--contours", "d.cli", "-q"});
+  EXPECT_NE(twice.code(), 0) << twice.describe();
+  EXPECT_FALSE(fs::exists(path("d.cli")));
+}
+
 // ---------------------------------------------------------------------------------------------------
 // 4. existing outputs
 

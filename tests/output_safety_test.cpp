@@ -669,6 +669,13 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
       {{"--z", ""}, "--z"},
       {{"--masks", ""}, "--masks"},
       {{"--summary", ""}, "--summary"},
+      // Written as --masks= with nothing after the '=', CLI11 took the next argument for the value (the
+      // masks went into a folder named -q).
+      {{"--masks=", "-q"}, "--masks: an empty value"},
+      {{"--summary=", "--force"}, "--summary: an empty value"},
+      // sr-lazy slices its layers in order on one thread: no bands, no band starts.
+      {{"--method", "sr-lazy", "--band-layers", "4"}, "--band-layers does nothing"},
+      {{"--method", "sr-lazy", "--candidates", "embree"}, "--candidates does nothing"},
   };
   for (const auto& [args, named] : cases) {
     std::vector<std::string> all{"slice", examplePart().string(), "-o", "a.cli"};
@@ -683,6 +690,15 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
     const RunResult r = run({"slice", "missing.stl", "-o", "a.cli", "--z", z});
     expectOneErrorLine(r);
     EXPECT_TRUE(contains(r.err, "toposlice: error: --z: the planes must be strictly increasing")) << r.err;
+  }
+  EXPECT_FALSE(fs::exists(path("-q")));
+  // The preview is fitted to the model: --units and --scale would change nothing in it.
+  for (const char* opt : {"--units", "--scale"}) {
+    const RunResult r =
+        run({"preview", examplePart().string(), "-o", "p.png", opt, opt[2] == 'u' ? "in" : "2", "-q"});
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, std::string(opt) + " does nothing in preview")) << r.err;
+    EXPECT_FALSE(fs::exists(path("p.png")));
   }
   const RunResult wrapped =
       run({"preview", examplePart().string(), "-o", "p.png", "--size", "4294967297x10", "-q"});

@@ -9,6 +9,7 @@
 #include <cstdio>
 #include <new>
 #include <string>
+#include <string_view>
 #include <thread>
 #include <vector>
 
@@ -463,7 +464,9 @@ int run(int argc, char** argv) {
   slice->add_option("--join-tolerance", options.slice.joinTolerance,
                     "mm; cp and sr-lazy join segment ends this close (default 1e-5)");
   std::string resolution, origin;
-  slice->add_option("--contours", outputs, "Same as -o: contour output (.cli, .svg, .3mf)");
+  std::vector<std::string> contourOutputs;  // joined to `outputs` after parsing: one vector would keep
+                                            // only the last option's values
+  slice->add_option("--contours", contourOutputs, "Same as -o: contour output (.cli, .svg, .3mf)");
   slice->add_option("--masks", options.masks.output,
                     "Mask stack: .sl1 (Prusa SL1 zip of PNGs), .goo (Elegoo), .nanodlp, .exr, .vdb, or a "
                     "directory of PNGs");
@@ -585,7 +588,17 @@ int run(int argc, char** argv) {
   }
 
   try {
+    // `--masks=` with nothing after the '=' is an empty value too; CLI11 would take the next argument
+    // for it (`--masks= -q` wrote the masks into a folder named -q).
+    for (int i = 1; i < argc; ++i) {
+      const std::string_view arg = argv[i];
+      if (arg == "--") break;
+      if (arg.size() > 3 && arg.starts_with("--") && arg.find('=') == arg.size() - 1)
+        throw CLI::ValidationError(std::string(arg.substr(0, arg.size() - 1)),
+                                   "an empty value: expected one");
+    }
     app.parse(argc, argv);
+    outputs.insert(outputs.end(), contourOutputs.begin(), contourOutputs.end());
     // An option given an empty value (--masks "", --z "") is a mistake, not the option left out.
     for (const CLI::App* c : app.get_subcommands())
       for (const CLI::Option* o : c->get_options())
@@ -622,8 +635,13 @@ int run(int argc, char** argv) {
     // plate may be committing another variant's or plate's outputs meanwhile).
     stopAtOnceWhileReading().store(*info || *preview || *templ || *slice);
     if (*info) return runInfo(model, meshReadOptions(common), common.quiet);
-    if (*preview)
+    if (*preview) {
+      // The picture is fitted to the model: a length unit or a scale changes nothing in it.
+      for (const char* opt : {"--units", "--scale"})
+        if (preview->count(opt) > 0)
+          throw InputError(std::string(opt) + " does nothing in preview: the picture is fitted to the model");
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
+    }
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
     if (*plate)
       return plateExplain ? explainPlateSettings(plateJobPath, plateOutputDir)
@@ -662,6 +680,11 @@ int run(int argc, char** argv) {
           "--method sr or sr-lazy (--method cp uses no adjacency table)");
     needs(slice->count("--join-tolerance") > 0, method != "sr", "--join-tolerance",
           "--method cp or sr-lazy (the default sr joins segments through the adjacency table)");
+    // sr-lazy slices its layers in order on one thread, from the first facets up: no bands to size, no
+    // band starts to find.
+    for (const char* opt : {"--band-layers", "--candidates"})
+      needs(slice->count(opt) > 0, method != "sr-lazy", opt,
+            "--method sr or cp (--method sr-lazy slices its layers in order, without bands)");
     options.read = meshReadOptions(common);
     options.planes = planeSpec(planes);
     parseSliceMethod(method, options.slice.method);
