@@ -660,6 +660,30 @@ TEST_F(CliToolMasks, Sl1PresetsWritePortraitImagesAsPrusaSlicer) {
                                "display_orientation=portrait", "--masks", path("w.exr").string(), "-q"});
   expectOneErrorLine(asked);
   EXPECT_NE(asked.err.find("SL1 archives and PNG folders only"), std::string::npos) << asked.err;
+  // There the preset's own mirroring goes with its portrait display, but a mirroring the user set
+  // applies, as --mirror-y does (it was dropped without a word, while --explain and the summary said
+  // display_mirror_y = 1); --explain says what the masks have.
+  const auto goo = [&](const std::string& out, std::vector<std::string> extra) {
+    std::vector<std::string> args{
+        "slice", path("l.stl").string(), "-H", "1", "--printer", "sl1", "--masks", out, "-q"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const RunResult r = run(args);
+    EXPECT_EQ(r.code(), 0) << r.describe();
+    return r.out;
+  };
+  goo("plain.goo", {});
+  goo("set.goo", {"--set", "display_mirror_y=1"});
+  goo("option.goo", {"--mirror-y"});
+  EXPECT_NE(readBytes(path("plain.goo")), readBytes(path("set.goo")));
+  EXPECT_EQ(readBytes(path("set.goo")), readBytes(path("option.goo")));
+  const std::string explained = goo("e.goo", {"--display-mirror-y", "1", "--explain"});
+  EXPECT_TRUE(
+      contains(explained, "display_orientation        = landscape    (printer sl1, as .goo masks have it)"))
+      << explained;
+  EXPECT_TRUE(
+      contains(explained, "display_mirror_x           = 0            (printer sl1, as .goo masks have it)"))
+      << explained;
+  EXPECT_TRUE(contains(explained, "display_mirror_y           = 1            (command line)")) << explained;
 }
 
 // EXR stacks: the same bytes for every thread count and band size, and every layer, read by tinyexr,

@@ -169,7 +169,7 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
   o.masks.mirrorY = job.mirrorY.value_or(false);
   o.masks.antialias = job.antialias;
   o.masks.fitAdvice = "set settings.origin to move the image, or use a smaller model or larger pixels";
-  o.print = batchJobSettings(job);
+  o.print = settingsForMaskFormat(batchJobSettings(job), variant.masks);
   o.add = variant.add;
   o.remove = variant.remove;
   o.report = variant.report;

@@ -738,6 +738,7 @@ int run(int argc, char** argv) {
     applyJobMirror(options.print, options.masks.mirrorX ? std::optional<bool>(true) : std::nullopt,
                    options.masks.mirrorY ? std::optional<bool>(true) : std::nullopt, "command line");
     recordDisplayOptions(options.print, options.masks);
+    options.print = settingsForMaskFormat(options.print, options.masks.output);
     const PrintSettings& print = options.print;
     needs(slice->count("--printer") > 0,
           masks || print.scales() || print.absoluteCorrection != 0 || print.elefantFootCompensation > 0,

@@ -587,7 +587,7 @@ PrintSettings plateJobSettings(const PlateJob& job) {
       {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings",
        job.sourceFile.string() + ": printer", job.sourceFile.string() + ": material"});
   applyJobMirror(print, job.mirrorX, job.mirrorY, "plate job settings.mirror");
-  return print;
+  return settingsForMaskFormat(print, job.masks);
 }
 
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {

@@ -173,6 +173,33 @@ void recordDisplayOptions(PrintSettings& print, MaskOptions& o) {
   }
 }
 
+namespace {
+
+bool landscapeOnlyFormat(const std::string& ext) {
+  return ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
+}
+
+bool setByPrinter(const PrintSettings& print, const char* key) {
+  const auto origin = print.origin.find(key);
+  return origin == print.origin.end() || origin->second.starts_with("printer ");
+}
+
+}  // namespace
+
+PrintSettings settingsForMaskFormat(PrintSettings print, const std::filesystem::path& masks) {
+  const std::string ext = lowerExtension(masks);
+  if (print.orientation != "portrait" || !landscapeOnlyFormat(ext) ||
+      !setByPrinter(print, "display_orientation"))
+    return print;
+  const auto origin = print.origin.find("display_orientation");
+  const std::string why = (origin != print.origin.end() ? origin->second : std::string("printer")) + ", as " +
+                          ext + " masks have it";
+  assignSetting(print, "display_orientation", "landscape", why);
+  for (const char* key : {"display_mirror_x", "display_mirror_y"})
+    if (setByPrinter(print, key)) assignSetting(print, key, "0", why);
+  return print;
+}
+
 MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
                     const std::string& name, const std::vector<double>& planes) {
   MaskJob job;
@@ -214,11 +241,13 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
     throw InputError(o.output.string() + ": printer_model '" + print.printerModel + "' has " +
                      std::to_string(print.printerModel.size()) +
                      " bytes, and a GOO header holds a printer name of 31 at most");
-  const bool landscapeOnly = ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
-  const bool portraitIgnored = print.orientation == "portrait" && landscapeOnly;
-  // --mirror-x/-y mirror on top of the printer's own mirroring (in PrusaSlicer's sense of the setting).
-  const bool mirrorX = o.mirrorX || (!portraitIgnored && print.mirrorX);
-  const bool mirrorY = o.mirrorY || (!portraitIgnored && print.mirrorY);
+  const bool portraitIgnored = print.orientation == "portrait" && landscapeOnlyFormat(ext);
+  // --mirror-x/-y mirror on top of the printer's own mirroring (in PrusaSlicer's sense of the setting);
+  // a mirroring the user set applies to every format (settingsForMaskFormat).
+  const bool mirrorX =
+      o.mirrorX || (print.mirrorX && (!portraitIgnored || !setByPrinter(print, "display_mirror_x")));
+  const bool mirrorY =
+      o.mirrorY || (print.mirrorY && (!portraitIgnored || !setByPrinter(print, "display_mirror_y")));
   job.grid = placeGrid(extent, width, height, pixel, o.origin, mirrorX, mirrorY);
   const double overhang = gridOverhang(extent, job.grid);
   if (overhang > 0 && !o.crop) {

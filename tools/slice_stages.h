@@ -55,6 +55,14 @@ void recordDisplayOptions(PrintSettings& print, MaskOptions& o);
 MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
                     const std::string& name, const std::vector<double>& planes);
 
+// The settings as a mask output `masks` of its format uses them. EXR and VDB stacks are volumes in the
+// model's frame, GOO and NanoDLP files landscape images: a printer preset's portrait display (sl1,
+// sl1s) and the mirroring that belongs to it (display_mirror_x/y that came with the printer) become
+// landscape and unmirrored, so that --explain, the summary and the files say what the masks have. A
+// mirroring the user set (an option, --set, a job's settings) stays and applies. A portrait orientation
+// the user set is left for makeMaskJob to refuse. Other outputs: unchanged.
+PrintSettings settingsForMaskFormat(PrintSettings print, const std::filesystem::path& masks);
+
 // The settings' mask options that contradict each other: gamma_correction 0 (binary) with anti-aliasing
 // (`antialiasName`, the option or key that asks for it), and a light map on binary masks (when `masks`).
 // Throws InputError.
