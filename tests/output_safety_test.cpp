@@ -739,6 +739,42 @@ TEST_F(OptionChecks, ABatchVariantThatDoesNotFitIsToldWhatTheJobCanDo) {
   EXPECT_FALSE(contains(r.err, "--crop")) << r.err;
 }
 
+// Two values the user gave for one display setting: the option replaced the setting without a word
+// (--display-pixels-x 400 --resolution 300x300 made 300-pixel images). Refused naming both, in slice and
+// in a batch job; a mirroring given twice the same way is no contradiction.
+TEST_F(OptionChecks, DisplayOptionsAndTheSettingsTheyReplaceAreNotBothGiven) {
+  const std::vector<std::pair<std::vector<std::string>, std::string>> cases{
+      {{"--display-pixels-x", "400", "--resolution", "300x300"}, "--resolution and display_pixels_x"},
+      {{"--set", "display_pixels_y=400", "--resolution", "300x300"}, "--resolution and display_pixels_y"},
+      {{"--display-width", "20", "--pixel", "0.05"}, "--pixel and display_width"},
+      {{"--display-mirror-x", "0", "--mirror-x"},
+       "--mirror-x and display_mirror_x 0 (command line) contradict"},
+      {{"--set", "display_mirror_y=0", "--mirror-y"}, "--mirror-y and display_mirror_y 0"},
+  };
+  for (const auto& [args, named] : cases) {
+    std::vector<std::string> all{"slice",     examplePart().string(), "-H",      "1",
+                                 "--printer", "generic-8k",           "--masks", "m.sl1"};
+    all.insert(all.end(), args.begin(), args.end());
+    const RunResult r = run(all);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, named)) << testing::PrintToString(args) << "\n" << r.err;
+    EXPECT_FALSE(fs::exists(path("m.sl1")));
+  }
+  const RunResult same = run({"slice", examplePart().string(), "-H", "1", "--printer", "generic-8k",
+                              "--display-mirror-x", "1", "--mirror-x", "--masks", "m.sl1", "-q"});
+  EXPECT_EQ(same.code(), 0) << same.describe();
+  writeBytes(path("job.json"), R"({"version": 1, "template": {"model": ")" + examplePart().string() +
+                                   R"("}, "settings": {"layer_height": 1, "printer": "generic-8k",
+      "resolution": [300, 300], "print_settings": {"display_pixels_x": 400}},
+      "variants": [{"name": "v", "model": ")" +
+                                   examplePart().string() + R"(", "masks": "v.sl1"}]})");
+  const RunResult batch = run({"batch", "job.json", "-q"});
+  EXPECT_NE(batch.code(), 0) << batch.describe();
+  EXPECT_TRUE(contains(batch.err, "settings.resolution and display_pixels_x (batch job print_settings)"))
+      << batch.err;
+  EXPECT_FALSE(fs::exists(path("v.sl1")));
+}
+
 // Batch variants write every printer file slice writes (they took .sl1, .exr and .vdb only), with the
 // job's printer settings: the same bytes as slice gives, but for the archives' dates.
 TEST_F(OptionChecks, BatchVariantsWriteEveryPrinterFile) {

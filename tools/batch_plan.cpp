@@ -116,6 +116,9 @@ PrintSettings batchJobSettings(const BatchJob& job) {
   PrintSettings print = resolvePrintSettings(
       {job.profile, job.printer, job.material, job.printSettings, "batch job print_settings",
        job.sourceFile.string() + ": settings.printer", job.sourceFile.string() + ": settings.material"});
+  checkDisplayOverrides(print, "batch job print_settings", job.resolution.has_value(), job.pixel.has_value(),
+                        job.mirrorX, job.mirrorY,
+                        {"settings.resolution", "settings.pixel", "settings.mirror", "settings.mirror"});
   applyJobMirror(print, job.mirrorX, job.mirrorY, "batch job settings.mirror");
   // Masks need an image: refused here, before the template and any variant (it was found per variant,
   // naming slice's options).

@@ -735,6 +735,11 @@ int run(int argc, char** argv) {
     // --mirror-x/-y mirror the display on top of the printer's own mirroring, --resolution and --pixel
     // replace its size: recorded as its settings, so that --explain and the summary say what the images
     // have.
+    checkDisplayOverrides(options.print, "command line", options.masks.resolution.has_value(),
+                          options.masks.pixel.has_value(),
+                          options.masks.mirrorX ? std::optional<bool>(true) : std::nullopt,
+                          options.masks.mirrorY ? std::optional<bool>(true) : std::nullopt,
+                          {"--resolution", "--pixel", "--mirror-x", "--mirror-y"});
     applyJobMirror(options.print, options.masks.mirrorX ? std::optional<bool>(true) : std::nullopt,
                    options.masks.mirrorY ? std::optional<bool>(true) : std::nullopt, "command line");
     recordDisplayOptions(options.print, options.masks);

@@ -586,6 +586,9 @@ PrintSettings plateJobSettings(const PlateJob& job) {
   PrintSettings print = resolvePrintSettings(
       {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings",
        job.sourceFile.string() + ": printer", job.sourceFile.string() + ": material"});
+  checkDisplayOverrides(print, "plate job print_settings", job.resolution.has_value(), job.pixel.has_value(),
+                        job.mirrorX, job.mirrorY,
+                        {"settings.resolution", "settings.pixel", "settings.mirror", "settings.mirror"});
   applyJobMirror(print, job.mirrorX, job.mirrorY, "plate job settings.mirror");
   return settingsForMaskFormat(print, job.masks);
 }

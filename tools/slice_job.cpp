@@ -149,6 +149,31 @@ double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& plan
   return planes.size() >= 2 ? planes[1] - planes[0] : 0.0;
 }
 
+void checkDisplayOverrides(const PrintSettings& print, const std::string& userOrigin, bool resolution,
+                           bool pixel, std::optional<bool> mirrorX, std::optional<bool> mirrorY,
+                           const DisplayOptionNames& names) {
+  const auto userSet = [&](const char* key) {
+    const auto origin = print.origin.find(key);
+    return origin != print.origin.end() && origin->second == userOrigin;
+  };
+  const auto refuse = [&](const char* option, const char* key, const char* what) {
+    throw InputError(std::string(option) + " and " + key + " (" + userOrigin + ") both give " + what +
+                     ": give one of them");
+  };
+  for (const char* key : {"display_pixels_x", "display_pixels_y"})
+    if (resolution && userSet(key)) refuse(names.resolution, key, "the image size");
+  for (const char* key : {"display_width", "display_height"})
+    if (pixel && userSet(key)) refuse(names.pixel, key, "the pixel size");
+  const auto contradiction = [&](const char* option, const char* key, bool value) {
+    throw InputError(std::string(option) + " and " + key + " " + (value ? "1" : "0") + " (" + userOrigin +
+                     ") contradict each other: give one of them");
+  };
+  if (mirrorX && userSet("display_mirror_x") && *mirrorX != print.mirrorX)
+    contradiction(names.mirrorX, "display_mirror_x", print.mirrorX);
+  if (mirrorY && userSet("display_mirror_y") && *mirrorY != print.mirrorY)
+    contradiction(names.mirrorY, "display_mirror_y", print.mirrorY);
+}
+
 void recordDisplayOptions(PrintSettings& print, MaskOptions& o) {
   if (!o.resolution && !o.pixel) return;
   const bool pixelGiven = o.pixel.has_value();

@@ -52,6 +52,22 @@ double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& plan
 // alone keeps the printer's pitch, which `o` then carries as its pixel (the same bits the masks use).
 void recordDisplayOptions(PrintSettings& print, MaskOptions& o);
 
+// The job's own display options and the display settings the user set (those whose origin is
+// `userOrigin`: "command line", "batch job print_settings", ...) must not both say one thing: the option
+// replaced the setting without a word (--display-pixels-x 400 --resolution 300x300 made 300). Throws
+// InputError naming both for an image size (`resolution`) with display_pixels_x/y, a pixel size
+// (`pixel`) with display_width/height, or a mirroring (`mirrorX/Y`: given, and to what) with
+// display_mirror_x/y of the other value. `names`: how the options are called in that job.
+struct DisplayOptionNames {
+  const char* resolution;
+  const char* pixel;
+  const char* mirrorX;
+  const char* mirrorY;
+};
+void checkDisplayOverrides(const PrintSettings& print, const std::string& userOrigin, bool resolution,
+                           bool pixel, std::optional<bool> mirrorX, std::optional<bool> mirrorY,
+                           const DisplayOptionNames& names);
+
 MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const BoundingBox& extent,
                     const std::string& name, const std::vector<double>& planes);
 
