@@ -836,7 +836,7 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
       {"--masks", "m.nanodlp", "--light-pwm", "100", "--printer", "sl1"},
       // The density only makes the resin mass of the summary and of the files that record it.
       {"-o", "a.cli", "--material-density", "1.5"},
-      {"--masks", "m.sl1", "--material-density", "1.5", "--printer", "sl1"},
+      {"--masks", "pngs", "--material-density", "1.5", "--printer", "sl1"},
       // Named as given: the option's own name, or --set KEY.
       {"-o", "a.cli", "--elefant-foot-layers", "3"},
       {"--masks", "m.sl1", "--set", "light_pwm=3", "--printer", "sl1"},
@@ -850,6 +850,28 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
     EXPECT_TRUE(contains(r.err, named + " does nothing")) << r.err;
   }
   EXPECT_TRUE(entries(dir_).empty());
+  // An SL1 archive records it (prusaslicer.ini, as PrusaSlicer's own): accepted there (it was refused).
+  const RunResult sl1 = run({"slice", examplePart().string(), "--masks", "d.sl1", "--material-density", "1.5",
+                             "--printer", "sl1", "-H", "1", "-q"});
+  EXPECT_EQ(sl1.code(), 0) << sl1.describe();
+  // A batch or plate job's print_settings that slice refuses, refused there too (they went through).
+  const std::string part = examplePart().string();
+  const std::vector<std::pair<std::string, std::string>> jobs{
+      {R"("elefant_foot_layers": 3)",
+       "settings.print_settings.elefant_foot_layers: does nothing in this job: "
+       "it needs elefant_foot_compensation > 0"},
+      {R"("material_density": 1.2)", "settings.print_settings.material_density: does nothing in this job"},
+  };
+  for (const auto& [setting, message] : jobs) {
+    writeBytes(path("job.json"), R"({"version": 1, "template": {"model": ")" + part +
+                                     R"("}, "settings": {"layer_height": 1, "print_settings": {)" + setting +
+                                     R"(}}, "variants": [{"name": "v", "model": ")" + part +
+                                     R"(", "contours": "v.cli"}]})");
+    const RunResult r = run({"batch", "job.json", "-q"});
+    EXPECT_NE(r.code(), 0) << r.describe();
+    EXPECT_TRUE(contains(r.err, message)) << r.err;
+    EXPECT_FALSE(fs::exists(path("v.cli")));
+  }
 }
 
 // --explain refuses what the run would refuse (it approved a light map without anti-aliasing, which the

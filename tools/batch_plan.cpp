@@ -120,6 +120,12 @@ PrintSettings batchJobSettings(const BatchJob& job) {
                         job.mirrorX, job.mirrorY,
                         {"settings.resolution", "settings.pixel", "settings.mirror", "settings.mirror"});
   applyJobMirror(print, job.mirrorX, job.mirrorY, "batch job settings.mirror");
+  // The elephant foot's other keys shape its compensation: without one they do nothing (slice refuses them).
+  for (const auto& [k, value] : job.printSettings)
+    if (k.starts_with("elefant_foot_") && k != "elefant_foot_compensation" &&
+        !(print.elefantFootCompensation > 0))
+      throw InputError(job.sourceFile.string() + ": settings.print_settings." + k +
+                       ": does nothing in this job: it needs elefant_foot_compensation > 0");
   // Masks need an image: refused here, before the template and any variant (it was found per variant,
   // naming slice's options).
   const bool masks = std::any_of(job.variants.begin(), job.variants.end(),

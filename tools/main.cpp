@@ -754,17 +754,12 @@ int run(int argc, char** argv) {
               : std::vector<std::filesystem::path>{};
     for (std::size_t i = 0; i < choice.overrides.size(); ++i) {
       const std::string& k = choice.overrides[i].first;
-      if (const std::string why = settingUnusedReason(k, maskOutputs, "mask output (--masks)"); !why.empty())
+      if (const std::string why =
+              settingUnusedReason(k, maskOutputs, "mask output (--masks)", !options.summary.empty());
+          !why.empty())
         throw InputError(givenAs[i] + " does nothing in this job: " + why);
       needs(k.starts_with("elefant_foot_") && k != "elefant_foot_compensation",
             options.print.elefantFootCompensation > 0, givenAs[i].c_str(), "elefant_foot_compensation > 0");
-      // The density only turns the resin volume into a mass: in the summary and the files that record it.
-      const std::string maskExt = masks ? lowerExtension(options.masks.output) : std::string();
-      if (k == "material_density" && options.summary.empty() && maskExt != ".goo" && maskExt != ".exr" &&
-          maskExt != ".vdb")
-        throw InputError(givenAs[i] +
-                         " does nothing in this job: it gives the resin mass of --summary and of .goo, .exr "
-                         "and .vdb masks");
     }
     options.rebuildOnMismatch = onMismatch == "rebuild";
     options.templateFile = templatePath;

@@ -408,7 +408,14 @@ bool maskFormatCarries(const std::string& ext, std::string_view key) {
 }  // namespace
 
 std::string settingUnusedReason(std::string_view key, std::span<const std::filesystem::path> maskOutputs,
-                                std::string_view maskOutputName) {
+                                std::string_view maskOutputName, bool summary) {
+  if (key == "material_density") {  // it only turns the resin volume into a mass where one is written
+    if (summary) return "";
+    for (const auto& path : maskOutputs)
+      for (const char* ext : {".sl1", ".sl1s", ".goo", ".exr", ".vdb"})
+        if (lowerExtension(path) == ext) return "";
+    return "it gives the resin mass of a summary and of .sl1, .goo, .exr and .vdb masks";
+  }
   static constexpr std::string_view kPrinterFileOnly[] = {
       "printer_model",        "exposure_time",     "initial_exposure_time",
       "faded_layers",         "lift_distance",     "lift_speed",

@@ -91,9 +91,11 @@ std::span<const SettingKey> settingKeys();
 // need a mask output ("it needs " + `maskOutputName`, what the job would have to give); the ones that are
 // only written into the printer file (printer_model, the exposures, the motion and light keys) need a mask
 // format that carries them: SL1 the model and exposures, NanoDLP the exposures and the lift, retract and wait
-// keys, GOO all of them, EXR and VDB all (as metadata), a PNG folder none.
+// keys, GOO all of them, EXR and VDB all (as metadata), a PNG folder none. material_density only gives
+// the resin mass: it needs a `summary` (slice's --summary) or masks that record it (.sl1, .sl1s, .goo,
+// .exr, .vdb).
 std::string settingUnusedReason(std::string_view key, std::span<const std::filesystem::path> maskOutputs,
-                                std::string_view maskOutputName);
+                                std::string_view maskOutputName, bool summary = false);
 
 // Which profiles to use and the overrides (key, value text) on top.
 struct ProfileChoice {
