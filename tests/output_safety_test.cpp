@@ -850,6 +850,16 @@ TEST_F(OptionChecks, OptionsThatDoNothingAreErrors) {
     EXPECT_TRUE(contains(r.err, named + " does nothing")) << r.err;
   }
   EXPECT_TRUE(entries(dir_).empty());
+  // A material for contours only: its exposures need masks (a material_correction would change them).
+  const RunResult material = run({"slice", examplePart().string(), "-o", "a.cli", "--material", "default"});
+  expectOneErrorLine(material);
+  EXPECT_TRUE(contains(material.err, "--material default does nothing in this job")) << material.err;
+  EXPECT_FALSE(fs::exists(path("a.cli")));
+  writeBytes(path("p.json"), R"({"materials": {"shrinks": {"material_correction_x": 1.01}}})");
+  EXPECT_EQ(run({"slice", examplePart().string(), "-H", "1", "-o", "a.cli", "--profile", "p.json",
+                 "--material", "shrinks", "-q"})
+                .code(),
+            0);
   // An SL1 archive records it (prusaslicer.ini, as PrusaSlicer's own): accepted there (it was refused).
   const RunResult sl1 = run({"slice", examplePart().string(), "--masks", "d.sl1", "--material-density", "1.5",
                              "--printer", "sl1", "-H", "1", "-q"});

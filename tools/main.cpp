@@ -752,6 +752,24 @@ int run(int argc, char** argv) {
     const std::vector<std::filesystem::path> maskOutputs =
         masks ? std::vector<std::filesystem::path>{options.masks.output}
               : std::vector<std::filesystem::path>{};
+    // A material chosen by name for contours only does nothing unless one of its settings changes the
+    // contours (a material_correction) or the summary (material_density): its exposures need masks.
+    if (slice->count("--material") > 0 && !masks) {
+      std::string materialKeys;
+      bool used = false;
+      for (const auto& [key, from] : options.print.origin) {
+        if (!from.starts_with("material ") && from.find(" material ") == std::string::npos) continue;
+        materialKeys += (materialKeys.empty() ? "" : ", ") + key;
+        used = used || settingUnusedReason(key, maskOutputs, "", !options.summary.empty()).empty();
+      }
+      if (!used)
+        throw InputError(
+            "--material " + material + " does nothing in this job: " +
+            (materialKeys.empty() ? std::string("it changes neither")
+                                  : "none of its settings (" + materialKeys + ") changes") +
+            (materialKeys.empty() ? " the contours nor the summary" : " the contours or the summary") +
+            "; its exposures need mask output (--masks)");
+    }
     for (std::size_t i = 0; i < choice.overrides.size(); ++i) {
       const std::string& k = choice.overrides[i].first;
       if (const std::string why =
