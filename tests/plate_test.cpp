@@ -834,6 +834,28 @@ TEST_F(PlateTest, ExistingOutputsAreRefusedBeforeTheSlicing) {
   EXPECT_EQ(readBytes(dir_ / "m-plate2.sl1"), "not an archive\n");
 }
 
+// A later plate's output name (-plate2, ...) that is one of the job's inputs: refused like plate 1's.
+// A part's model there (a toposlice 3MF, so marked as toposlice's own) was replaced by plate 2's contours
+// with overwrite on, and a light map inside plate 2's mask folder deleted.
+TEST_F(PlateTest, ALaterPlatesOutputNeverReplacesAnInput) {
+  ASSERT_EQ(run({"slice", tool_test::examplePart(), "-H", "0.5", "-o", "c-plate2.3mf", "-q"}).code(), 0);
+  const std::string model = readBytes(dir_ / "c-plate2.3mf");
+  const std::string part = q((dir_ / "c-plate2.3mf").string());
+  try {
+    runPlateJob(job("{\"settings\": {\"layer_height\": 0.5, \"pixel\": 0.05, \"resolution\": [600, 400], "
+                    "\"overwrite\": true}, \"arrange\": {\"margin\": 1, \"spacing\": 1},"
+                    "\"parts\": [{\"name\": \"a\", \"model\": " +
+                    part + ", \"placement\": \"auto\"}, {\"name\": \"b\", \"model\": " + part +
+                    ", \"placement\": \"auto\"}], \"outputs\": {\"contours\": [\"c.3mf\"]}}"),
+                nullptr);
+    FAIL() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(std::string(e.what()).find("c-plate2.3mf: is the job's input"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(readBytes(dir_ / "c-plate2.3mf"), model);
+  EXPECT_FALSE(fs::exists(dir_ / "c.3mf"));
+}
+
 }  // namespace
 }  // namespace toposlice
 

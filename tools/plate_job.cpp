@@ -97,10 +97,14 @@ void checkDistinctPlateOutputs(const PlateJob& job, uint32_t plates) {
     }
 }
 
-// Outputs of plates [first, end) that may not be written (they exist and the job does not overwrite, or
-// they are not toposlice's to replace), refused before the slicing.
-void checkPlateOutputs(const PlateJob& job, uint32_t first, uint32_t end) {
+// Outputs of plates [first, end) that may not be written (an input of the job, also through a link or
+// inside a mask folder; they exist and the job does not overwrite, or they are not toposlice's to
+// replace), refused before the slicing. The later plates' names (-plate2, ...) too: a part's model or the
+// light map at one of them was replaced by that plate's output, being marked as toposlice's.
+void checkPlateOutputs(const PlateJob& job, uint32_t first, uint32_t end,
+                       const std::vector<std::filesystem::path>& inputs) {
   forEachPlateOutput(job, first, end, [&](const std::filesystem::path& path, bool masks) {
+    checkNotAnInput(path, inputs);
     if (masks)
       checkMaskOutputAllowed(path, job.overwrite);
     else
@@ -580,6 +584,7 @@ struct PreparedPlateJob::Impl {
   std::vector<LoadedPart> loaded;                         // in the plate orientation
   PlateResult result;
   std::vector<std::filesystem::path> outputs;  // plate 1's: masks, report, picture, contours (empty: none)
+  std::vector<std::filesystem::path> inputs;   // the job file, profile, light map, parts' files
 };
 
 PrintSettings plateJobSettings(const PlateJob& job) {
@@ -626,10 +631,9 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   outputs = {job.masks, job.report, job.picture};
   outputs.insert(outputs.end(), job.contours.begin(), job.contours.end());
   std::erase_if(inputs, [](const std::filesystem::path& p) { return p.empty(); });
-  for (const auto& o : outputs)
-    if (!o.empty()) checkNotAnInput(o, inputs);
+  impl_->inputs = inputs;
   checkDistinctPlateOutputs(job, 1);
-  checkPlateOutputs(job, 0, 1);  // before anything is read; the other plates' once they are known
+  checkPlateOutputs(job, 0, 1, inputs);  // before anything is read; the other plates' once they are known
 
   // Read every part (and each distinct template table once), in parallel across parts.
   auto start = std::chrono::steady_clock::now();
@@ -747,7 +751,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   result.arrangeSeconds = secondsSince(start);
   result.plates = arranged.plates;
   checkDistinctPlateOutputs(job, result.plates);
-  checkPlateOutputs(job, 1, result.plates);
+  checkPlateOutputs(job, 1, result.plates, impl_->inputs);
   for (uint32_t p = 0; p < arranged.plates; ++p) result.density.push_back(arranged.density(p));
   result.layers.assign(result.plates, 0);
   result.volumeMl.assign(result.plates, 0.0);
