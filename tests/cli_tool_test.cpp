@@ -1402,6 +1402,17 @@ TEST_F(CliToolInterrupt, SigtermDuringSl1OutputLeavesNothing) {
                     SIGTERM, path("big.sl1"), r);
 }
 
+// A hang-up (the terminal closed, an ssh session dropped) stops the job as SIGTERM does: it left the
+// staged archive and said nothing.
+TEST_F(CliToolInterrupt, SighupDuringSl1OutputLeavesNothing) {
+  RunResult r;
+  interruptAndCheck(*this,
+                    {"slice", sharedModel("derived/aligner_upper_case0.stl.gz").string(), "-H", "0.001",
+                     "--masks", "big.sl1", "--printer", "sl1", "-q"},
+                    SIGHUP, path("big.sl1"), r);
+  EXPECT_TRUE(contains(r.err, "interrupted")) << r.err;
+}
+
 TEST_F(CliToolInterrupt, SigtermDuringPngFolderOutputLeavesNothing) {
   RunResult r;
   interruptAndCheck(*this,

@@ -625,6 +625,9 @@ int run(int argc, char** argv) {
   ThreadLimit limit(common.threads);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  // A hang-up (the terminal closed, an ssh session dropped) stops the job as SIGTERM does; under nohup,
+  // which ignores it, it stays ignored.
+  if (std::signal(SIGHUP, onSignal) == SIG_IGN) std::signal(SIGHUP, SIG_IGN);
   // A file-size limit (ulimit -f) would kill the process with its temporaries in place; ignored, the
   // write fails with EFBIG instead and the job ends as on a full disk, leaving nothing behind.
   std::signal(SIGXFSZ, SIG_IGN);

@@ -770,6 +770,9 @@ int run(int argc, char** argv) {
 
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  // A hang-up stops the job as SIGTERM does (ignored under nohup, it stays ignored).
+  const bool hangUpIgnored = std::signal(SIGHUP, onSignal) == SIG_IGN;
+  if (hangUpIgnored) std::signal(SIGHUP, SIG_IGN);
   // A file-size limit (ulimit -f) would kill the process with its temporaries in place; ignored, the
   // write fails with EFBIG instead and the job ends as on a full disk, leaving nothing behind.
   std::signal(SIGXFSZ, SIG_IGN);
@@ -794,6 +797,7 @@ int run(int argc, char** argv) {
   // error status (the job's failure, already said), not an interrupt to report.
   std::signal(SIGINT, SIG_DFL);
   std::signal(SIGTERM, SIG_DFL);
+  std::signal(SIGHUP, hangUpIgnored ? SIG_IGN : SIG_DFL);
   MPI_Finalize();
   return status;
 }
