@@ -99,9 +99,11 @@ void StagedDirectory::commit() {
 
 void StagedDirectory::writeFile(const std::string& name, std::span<const uint8_t> data) const {
   const std::filesystem::path file = tempPath_ / name;
-  const std::filesystem::path& context = finalPath_;
+  // Errors name the output and the layer's file as it would be in it, never the staged folder.
+  const std::string context = finalPath_.string() + ": cannot ";
+  const std::string named = (finalPath_ / name).string() + ": ";
   const int fd = ::open(file.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
-  if (fd < 0) throw OutputError(context.string() + ": cannot create " + file.string() + ": " + reason(errno));
+  if (fd < 0) throw OutputError(context + "create " + named + reason(errno));
   const uint8_t* p = data.data();
   size_t left = data.size();
   while (left > 0) {
@@ -110,13 +112,13 @@ void StagedDirectory::writeFile(const std::string& name, std::span<const uint8_t
     if (n <= 0) {
       const int err = n < 0 ? errno : EIO;
       ::close(fd);
-      throw OutputError(context.string() + ": cannot write " + file.string() + ": " + reason(err));
+      throw OutputError(context + "write " + named + reason(err));
     }
     p += n;
     left -= static_cast<size_t>(n);
   }
   if (::close(fd) != 0) {
-    throw OutputError(context.string() + ": cannot write " + file.string() + ": " + reason(errno));
+    throw OutputError(context + "write " + named + reason(errno));
   }
 }
 

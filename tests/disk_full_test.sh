@@ -57,6 +57,8 @@ expect_clean() {
     fail "$name: the error does not name $target: $(cat "$err")"
   elif ! grep -q 'No space left on device' "$err"; then
     fail "$name: the error does not say the disk is full: $(cat "$err")"
+  elif grep -q '\.tmp-' "$err"; then
+    fail "$name: the error names a temporary, not the output: $(cat "$err")"
   elif [ -n "$left" ]; then
     fail "$name: left behind: $left"
   else
