@@ -9,6 +9,7 @@
 #include <cstring>
 #include <fstream>
 #include <iterator>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <system_error>
@@ -238,6 +239,24 @@ void removeFolderFromHandler(const char* path) noexcept {
 
 }  // namespace
 
+namespace {
+std::mutex gUnremovedMutex;
+std::vector<std::string> gUnremoved;
+}  // namespace
+
+void noteUnremovedTemporary(const std::filesystem::path& temp, int err) noexcept {
+  try {
+    const std::lock_guard<std::mutex> lock(gUnremovedMutex);
+    gUnremoved.push_back(temp.string() + " could not be removed (" + std::strerror(err) + ")");
+  } catch (...) {  // out of memory while unwinding: nothing more to say
+  }
+}
+
+std::vector<std::string> takeUnremovedTemporaries() {
+  const std::lock_guard<std::mutex> lock(gUnremovedMutex);
+  return std::exchange(gUnremoved, {});
+}
+
 void removePendingOutputs() noexcept {
   for (std::size_t i = 0; i < kMaxPendingOutputs; ++i) {
     if (gPending[i].state.load(std::memory_order_acquire) != 2) continue;
@@ -270,7 +289,7 @@ OutputFile::OutputFile(std::filesystem::path finalPath, bool overwrite)
 OutputFile::~OutputFile() {
   if (committed_) return;
   if (fd_ >= 0) ::close(fd_);
-  ::unlink(tempPath_.c_str());
+  if (::unlink(tempPath_.c_str()) != 0 && errno != ENOENT) noteUnremovedTemporary(tempPath_, errno);
   unregisterPendingOutput(registrySlot_);
 }
 
@@ -647,9 +666,10 @@ OutputTransaction::~OutputTransaction() {
   for (const Staged& s : staged_) {
     std::error_code ec;
     if (s.kind == OutputKind::File) {
-      ::unlink(s.temp.c_str());
+      if (::unlink(s.temp.c_str()) != 0 && errno != ENOENT) noteUnremovedTemporary(s.temp, errno);
     } else {
       std::filesystem::remove_all(s.temp, ec);
+      if (ec && outputPathExists(s.temp)) noteUnremovedTemporary(s.temp, ec.value());
     }
     unregisterPendingOutput(s.registrySlot);
   }

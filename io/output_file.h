@@ -92,6 +92,12 @@ inline constexpr std::size_t kMaxPendingOutputs = 64;
 // (their destructors find the temporary already gone, which is fine).
 void removePendingOutputs() noexcept;
 
+// Temporaries a failed or interrupted job could not remove as it unwound (their folder made read-only
+// under it, say): noted by the destructors, so that the command can say what it left instead of
+// claiming it left nothing. Thread-safe; `take` empties the list.
+void noteUnremovedTemporary(const std::filesystem::path& temp, int err) noexcept;
+std::vector<std::string> takeUnremovedTemporaries();
+
 // Whether anything (file, folder, link, even a dangling one) occupies `path`: the test every writer uses
 // before refusing to replace an output.
 bool outputPathExists(const std::filesystem::path& path);

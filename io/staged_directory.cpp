@@ -47,6 +47,7 @@ StagedDirectory::~StagedDirectory() {
   // a while) finds the folder in the registry and finishes it (it was left behind).
   std::error_code ec;
   std::filesystem::remove_all(tempPath_, ec);
+  if (ec && outputPathExists(tempPath_)) noteUnremovedTemporary(tempPath_, ec.value());
   unregisterPendingOutput(registrySlot_);
 }
 

@@ -435,6 +435,28 @@ TEST(OutputFile, DestructorRemovesTemporary) {
   EXPECT_TRUE(dir.entries().empty());
 }
 
+// A temporary the destructor cannot remove (its folder made read-only under the job; here, as root can
+// unlink anything there, a folder put in its place) is noted, so that the command says what it left.
+TEST(OutputFile, ATemporaryThatCannotBeRemovedIsNoted) {
+  ScratchDir dir;
+  takeUnremovedTemporaries();
+  std::filesystem::path temp;
+  {
+    OutputFile file(dir / "f.bin", false);
+    temp = file.tempPath();
+    std::filesystem::remove(temp);
+    std::filesystem::create_directories(temp / "in");
+  }
+  const std::vector<std::string> noted = takeUnremovedTemporaries();
+  ASSERT_EQ(noted.size(), 1u);
+  EXPECT_EQ(noted[0].rfind(temp.string() + " could not be removed (", 0), 0u) << noted[0];
+  EXPECT_TRUE(takeUnremovedTemporaries().empty());
+  {
+    OutputFile file(dir / "g.bin", false);  // removed as usual: nothing noted
+  }
+  EXPECT_TRUE(takeUnremovedTemporaries().empty());
+}
+
 TEST(OutputFile, TemporaryNamesAreUnique) {
   ScratchDir dir;
   OutputFile a(dir / "f.bin", true);

@@ -65,9 +65,17 @@ extern "C" void onSignal(int signal) {
   interruptRequested().store(true);
 }
 
+// Temporaries the job could not remove as it unwound (their folder made read-only, say): said, so that
+// no message claims nothing was left.
+void sayUnremovedTemporaries() {
+  for (const std::string& t : takeUnremovedTemporaries())
+    std::fprintf(stderr, "toposlice: the temporary %s; delete it by hand\n", t.c_str());
+}
+
 // After an interrupted command has cleaned up: end by the signal, as the shell expects.
 void endIfInterrupted() {
   if (gSignal == 0) return;
+  sayUnremovedTemporaries();
   std::fprintf(stderr, "toposlice: %s\n", gInterruptedMessage);
   std::signal(gSignal, SIG_DFL);
   std::raise(gSignal);
@@ -798,6 +806,7 @@ int run(int argc, char** argv) {
       return status;
     }
     endIfInterrupted();
+    sayUnremovedTemporaries();  // a batch's variants that failed
     return status;
   } catch (const std::bad_alloc&) {
     // Not "std::bad_alloc": what ran out, for which input, and what makes a job smaller. Every temporary
@@ -813,6 +822,7 @@ int run(int argc, char** argv) {
   } catch (const std::exception& e) {
     endIfInterrupted();
     std::fprintf(stderr, "toposlice: error: %s\n", e.what());
+    sayUnremovedTemporaries();
     return 1;
   }
 }
