@@ -746,10 +746,9 @@ int run(int argc, char** argv) {
     // --mirror-x/-y mirror the display on top of the printer's own mirroring, --resolution and --pixel
     // replace its size: recorded as its settings, so that --explain and the summary say what the images
     // have.
+    // (--mirror-x/-y mirror on top of display_mirror_x/y, whatever set it: no contradiction there.)
     checkDisplayOverrides(options.print, "command line", options.masks.resolution.has_value(),
-                          options.masks.pixel.has_value(),
-                          options.masks.mirrorX ? std::optional<bool>(true) : std::nullopt,
-                          options.masks.mirrorY ? std::optional<bool>(true) : std::nullopt,
+                          options.masks.pixel.has_value(), std::nullopt, std::nullopt,
                           {"--resolution", "--pixel", "--mirror-x", "--mirror-y"});
     applyJobMirror(options.print, options.masks.mirrorX ? std::optional<bool>(true) : std::nullopt,
                    options.masks.mirrorY ? std::optional<bool>(true) : std::nullopt, "command line");
