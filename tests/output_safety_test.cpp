@@ -920,6 +920,24 @@ TEST_F(OptionChecks, ExplainRefusesWhatTheRunRefuses) {
   EXPECT_FALSE(fs::exists(path("part.sl1")));
 }
 
+// The SL1's portrait light map with masks that are landscape whatever the display (.goo, .exr, ...): said
+// as a turned display, not only as "not the display's size" (the same map serves the .sl1).
+TEST_F(OptionChecks, APortraitLightMapForLandscapeMasksIsSaidToBeTurned) {
+  writeBytes(path("light.png"), sl1LightMapPng(220));
+  const RunResult goo = run({"slice", examplePart().string(), "-H", "0.5", "--printer", "sl1", "--antialias",
+                             "--light-map", "light.png", "--masks", "m.goo"});
+  expectOneErrorLine(goo);
+  EXPECT_TRUE(contains(goo.err,
+                       "light.png: the light map is 1440x2560 pixels, the masks 2560x1440 (landscape: "
+                       ".goo, .nanodlp, .exr and .vdb masks are, whatever the display)"))
+      << goo.err;
+  EXPECT_FALSE(fs::exists(path("m.goo")));
+  EXPECT_EQ(run({"slice", examplePart().string(), "-H", "0.5", "--printer", "sl1", "--antialias",
+                 "--light-map", "light.png", "--masks", "m.sl1", "-q"})
+                .code(),
+            0);
+}
+
 TEST_F(OptionChecks, UnknownMaskExtensionListsTheKnownOnes) {
   const RunResult r = run({"slice", examplePart().string(), "--masks", "layers.zip", "--printer", "sl1"});
   expectOneErrorLine(r);

@@ -355,6 +355,16 @@ MaskImage readLightMap(const std::filesystem::path& path, const MaskJob& job) {
   MaskImage map;
   if (!decodeMaskPng(bytes, map))
     throw InputError(path.string() + ": the light map must be an 8-bit (or less) grayscale PNG");
+  // The same display turned (a portrait printer's map for landscape-only masks, or the other way):
+  // said as such, not only as the wrong size.
+  if (map.width == job.grid.height && map.height == job.grid.width && map.width != map.height)
+    throw InputError(
+        path.string() + ": the light map is " + std::to_string(map.width) + "x" + std::to_string(map.height) +
+        " pixels, the masks " + std::to_string(job.grid.width) + "x" + std::to_string(job.grid.height) +
+        (job.grid.transposed
+             ? " (the portrait display's): a portrait display's light map is a portrait image"
+             : " (landscape: .goo, .nanodlp, .exr and .vdb masks are, whatever the display): the "
+               "light map for them is the landscape image"));
   if (map.width != job.grid.width || map.height != job.grid.height)
     throw InputError(path.string() + ": the light map is " + std::to_string(map.width) + "x" +
                      std::to_string(map.height) + " pixels, the masks " + std::to_string(job.grid.width) +
