@@ -278,7 +278,11 @@ TEST(BatchJob, RejectsBadValues) {
   expectError([](Json& j) { j["settings"]["layers"] = 5000000000ull; }, "settings.layers",
               "between 1 and 4294967295");
   expectError([](Json& j) { j["settings"]["pixel"] = 0; }, "settings.pixel", "must be positive");
-  expectError([](Json& j) { j["settings"]["join_tolerance"] = -1; }, "settings.join_tolerance", "negative");
+  expectError([](Json& j) { j["settings"]["join_tolerance"] = -1; }, "settings.join_tolerance",
+              "must be positive");
+  // 0 too: every variant failed with slice's "--join-tolerance 0: expected a distance > 0 mm".
+  expectError([](Json& j) { j["settings"]["join_tolerance"] = 0; }, "settings.join_tolerance",
+              "must be positive");
   // Settings that cannot apply: mask settings when no variant writes masks, binary CLI without .cli
   // contours, a join tolerance for the default method, settings the masks' formats do not carry.
   const auto contoursOnly = [](Json& j) {

@@ -922,6 +922,30 @@ TEST_F(OptionChecks, ExplainRefusesWhatTheRunRefuses) {
 
 // The SL1's portrait light map with masks that are landscape whatever the display (.goo, .exr, ...): said
 // as a turned display, not only as "not the display's size" (the same map serves the .sl1).
+// A batch job's mask settings that contradict each other are refused once, up front, naming the job's
+// settings: every variant failed with slice's option names (--antialias) before.
+TEST_F(OptionChecks, ABatchJobsContradictingMaskSettingsAreRefusedUpFront) {
+  const std::string part = examplePart().string();
+  const std::vector<std::pair<std::string, std::string>> cases{
+      {R"("antialias": true, "print_settings": {"gamma_correction": 0})",
+       "settings.antialias and gamma_correction 0 (binary masks) contradict each other"},
+      {R"("print_settings": {"display_orientation": "portrait"})",
+       "variant 'v': display_orientation portrait (batch job print_settings) applies to SL1 archives and PNG "
+       "folders only; .exr stacks are written landscape"},
+  };
+  for (const auto& [settings, message] : cases) {
+    writeBytes(path("job.json"), R"({"version": 1, "template": {"model": ")" + part +
+                                     R"("}, "settings": {"layer_height": 1, "printer": "sl1", )" + settings +
+                                     R"(}, "variants": [{"name": "v", "model": ")" + part +
+                                     R"(", "masks": "v.exr"}]})");
+    const RunResult r = run({"batch", "job.json", "-q"});
+    EXPECT_NE(r.code(), 0) << r.describe();
+    EXPECT_TRUE(contains(r.err, "job.json: " + message)) << r.err;
+    EXPECT_FALSE(contains(r.err, "--antialias")) << r.err;
+    EXPECT_FALSE(fs::exists(path("v.exr")));
+  }
+}
+
 TEST_F(OptionChecks, APortraitLightMapForLandscapeMasksIsSaidToBeTurned) {
   writeBytes(path("light.png"), sl1LightMapPng(220));
   const RunResult goo = run({"slice", examplePart().string(), "-H", "0.5", "--printer", "sl1", "--antialias",

@@ -130,6 +130,25 @@ PrintSettings batchJobSettings(const BatchJob& job) {
   // naming slice's options).
   const bool masks = std::any_of(job.variants.begin(), job.variants.end(),
                                  [](const BatchVariant& v) { return !v.masks.empty(); });
+  // What every variant's masks would refuse, refused once here naming the job's settings (each variant
+  // failed with slice's option names): anti-aliasing against gamma_correction 0, a light map on binary
+  // masks, a portrait display the user set for masks that are landscape only.
+  try {
+    checkMaskSettings(print, job.antialias, masks, "settings.antialias");
+  } catch (const InputError& e) {
+    throw InputError(job.sourceFile.string() + ": " + e.what());
+  }
+  const auto orientationFrom = print.origin.find("display_orientation");
+  if (print.orientation == "portrait" && orientationFrom != print.origin.end() &&
+      !orientationFrom->second.starts_with("printer "))
+    for (const BatchVariant& v : job.variants) {
+      const std::string ext = lowerExtension(v.masks);
+      if (ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp")
+        throw InputError(job.sourceFile.string() + ": variant '" + v.name +
+                         "': display_orientation portrait (" + orientationFrom->second +
+                         ") applies to SL1 archives and PNG folders only; " + ext +
+                         " stacks are written landscape");
+    }
   if (masks) {
     const uint32_t width = job.resolution ? (*job.resolution)[0] : print.pixelsX;
     const uint32_t height = job.resolution ? (*job.resolution)[1] : print.pixelsY;

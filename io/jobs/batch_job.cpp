@@ -104,7 +104,7 @@ class JobParser : public JsonReader {
     }
     if (const Json* x = find(*v, "join_tolerance")) {
       const double tol = number(*x, key("join_tolerance"));
-      if (!(tol >= 0)) fail(key("join_tolerance"), "must not be negative, got " + x->dump());
+      if (!(tol > 0)) fail(key("join_tolerance"), "must be positive (a distance in mm), got " + x->dump());
       job_.joinTolerance = tol;
     }
     if (const Json* x = find(*v, "printer")) job_.printer = string(*x, key("printer"));
