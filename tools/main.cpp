@@ -463,7 +463,7 @@ int run(int argc, char** argv) {
       ->add_option("--on-mismatch", onMismatch, "When the model does not match the template: fail or rebuild")
       ->check(CLI::IsMember({"fail", "rebuild"}));
   slice->add_option("--band-layers", options.slice.bandLayers,
-                    "Layers per parallel band (default: automatic)");
+                    "Layers per parallel band (default or 0: automatic)");
   std::string candidates = "sweep";
   slice
       ->add_option("--candidates", candidates,
