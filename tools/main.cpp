@@ -797,6 +797,10 @@ int run(int argc, char** argv) {
   };
   try {
     const int status = runCommand();
+    // The command is over (its outputs committed, or it failed or stopped): a stop signal from here on
+    // changes nothing, and must not end the process as interrupted with its outputs complete. (An
+    // interrupted command still ends by its signal below: endIfInterrupted restores the default first.)
+    for (const int stop : {SIGINT, SIGTERM, SIGHUP}) std::signal(stop, SIG_IGN);
     if (gSignal != 0 && !*batch) {
       // The signal came after the outputs had been committed: the job is complete, and saying
       // "nothing was left" would be untrue. It ends normally.
