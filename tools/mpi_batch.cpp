@@ -793,8 +793,12 @@ int run(int argc, char** argv) {
       }
     }
   }
-  // Done, and no temporaries left: a signal now is mpirun ending the ranks after one exited with an
-  // error status (the job's failure, already said), not an interrupt to report.
+  // Temporaries this rank could not remove as a variant or plate failed (their folder made read-only
+  // under it): named, not left unsaid.
+  for (const std::string& t : takeUnremovedTemporaries())
+    std::fprintf(stderr, "toposlice-mpi: rank %d: the temporary %s; delete it by hand\n", rank, t.c_str());
+  // Done, and no temporaries of ours live: a signal now is mpirun ending the ranks after one exited with
+  // an error status (the job's failure, already said), not an interrupt to report.
   std::signal(SIGINT, SIG_DFL);
   std::signal(SIGTERM, SIG_DFL);
   std::signal(SIGHUP, hangUpIgnored ? SIG_IGN : SIG_DFL);
