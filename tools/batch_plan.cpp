@@ -121,11 +121,7 @@ PrintSettings batchJobSettings(const BatchJob& job) {
                         {"settings.resolution", "settings.pixel", "settings.mirror", "settings.mirror"});
   applyJobMirror(print, job.mirrorX, job.mirrorY, "batch job settings.mirror");
   // The elephant foot's other keys shape its compensation: without one they do nothing (slice refuses them).
-  for (const auto& [k, value] : job.printSettings)
-    if (k.starts_with("elefant_foot_") && k != "elefant_foot_compensation" &&
-        !(print.elefantFootCompensation > 0))
-      throw InputError(job.sourceFile.string() + ": settings.print_settings." + k +
-                       ": does nothing in this job: it needs elefant_foot_compensation > 0");
+  checkElephantFootKeys(print, job.printSettings, job.sourceFile, "settings.print_settings.");
   // Masks need an image: refused here, before the template and any variant (it was found per variant,
   // naming slice's options).
   const bool masks = std::any_of(job.variants.begin(), job.variants.end(),
@@ -143,7 +139,7 @@ PrintSettings batchJobSettings(const BatchJob& job) {
       !orientationFrom->second.starts_with("printer "))
     for (const BatchVariant& v : job.variants) {
       const std::string ext = lowerExtension(v.masks);
-      if (ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp")
+      if (landscapeOnlyFormat(ext))
         throw InputError(job.sourceFile.string() + ": variant '" + v.name +
                          "': display_orientation portrait (" + orientationFrom->second +
                          ") applies to SL1 archives and PNG folders only; " + ext +

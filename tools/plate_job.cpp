@@ -596,11 +596,7 @@ PrintSettings plateJobSettings(const PlateJob& job) {
                         {"settings.resolution", "settings.pixel", "settings.mirror", "settings.mirror"});
   applyJobMirror(print, job.mirrorX, job.mirrorY, "plate job settings.mirror");
   // The elephant foot's other keys shape its compensation: without one they do nothing (slice refuses them).
-  for (const auto& [k, value] : job.printSettings)
-    if (k.starts_with("elefant_foot_") && k != "elefant_foot_compensation" &&
-        !(print.elefantFootCompensation > 0))
-      throw InputError(job.sourceFile.string() + ": print_settings." + k +
-                       ": does nothing in this job: it needs elefant_foot_compensation > 0");
+  checkElephantFootKeys(print, job.printSettings, job.sourceFile, "print_settings.");
   return settingsForMaskFormat(print, job.masks);
 }
 

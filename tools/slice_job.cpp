@@ -198,11 +198,21 @@ void recordDisplayOptions(PrintSettings& print, MaskOptions& o) {
   }
 }
 
-namespace {
-
 bool landscapeOnlyFormat(const std::string& ext) {
   return ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
 }
+
+void checkElephantFootKeys(const PrintSettings& print,
+                           const std::vector<std::pair<std::string, std::string>>& given,
+                           const std::filesystem::path& jobFile, const std::string& where) {
+  for (const auto& [k, value] : given)
+    if (k.starts_with("elefant_foot_") && k != "elefant_foot_compensation" &&
+        !(print.elefantFootCompensation > 0))
+      throw InputError(jobFile.string() + ": " + where + k +
+                       ": does nothing in this job: it needs elefant_foot_compensation > 0");
+}
+
+namespace {
 
 bool setByPrinter(const PrintSettings& print, const char* key) {
   const auto origin = print.origin.find(key);

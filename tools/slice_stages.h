@@ -8,6 +8,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -78,6 +79,17 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
 // mirroring the user set (an option, --set, a job's settings) stays and applies. A portrait orientation
 // the user set is left for makeMaskJob to refuse. Other outputs: unchanged.
 PrintSettings settingsForMaskFormat(PrintSettings print, const std::filesystem::path& masks);
+
+// Whether masks of extension `ext` are landscape whatever the display: .exr and .vdb (volumes in the
+// model's frame), .goo and .nanodlp (landscape images).
+bool landscapeOnlyFormat(const std::string& ext);
+
+// A job file's print_settings (`given`) naming an elephant-foot key other than the compensation while the
+// resolved settings have none: refused as doing nothing, as slice refuses the options. `where`: the
+// settings' place in the file ("settings.print_settings."). Throws InputError naming `jobFile`.
+void checkElephantFootKeys(const PrintSettings& print,
+                           const std::vector<std::pair<std::string, std::string>>& given,
+                           const std::filesystem::path& jobFile, const std::string& where);
 
 // The settings' mask options that contradict each other: gamma_correction 0 (binary) with anti-aliasing
 // (`antialiasName`, the option or key that asks for it), and a light map on binary masks (when `masks`).

@@ -335,13 +335,10 @@ std::string unsupportedRequiredExtension(const std::string& modelTag) {
   return "";
 }
 
-// The unit attribute of the package's root model, as written ("" when it states none, the millimetre).
-// lib3mf takes a unit it does not know for millimetres without a word (unit="parsec" read 1:1), so the
-// reader checks the attribute itself.
-std::optional<std::string> statedUnit(std::span<const std::byte> bytes) {
-  const std::optional<std::string> tag = modelStartTag(bytes);
-  if (!tag) return std::nullopt;
-  const std::string& start = *tag;
+// The unit attribute of the root model's start tag (modelStartTag), as written ("" when it states none,
+// the millimetre). lib3mf takes a unit it does not know for millimetres without a word (unit="parsec"
+// read 1:1), so the reader checks the attribute itself.
+std::optional<std::string> statedUnit(const std::string& start) {
   const std::size_t unit = start.find(" unit=");
   if (unit == std::string::npos || unit + 7 > start.size()) return std::nullopt;
   const char quote = start[unit + 6];
@@ -369,14 +366,17 @@ class Reader {
     // What lib3mf lets through (a coordinate that is not a number) or reads as nothing.
     if (const std::string problem = modelPartProblem(bytes, false); !problem.empty())
       throwInputError(name_, "not a valid 3MF file: " + problem);
-    if (const std::optional<std::string> tag = modelStartTag(bytes))
+    // The root model's start tag, inflated once for its required extensions and its unit.
+    const std::optional<std::string> tag = modelStartTag(bytes);
+    if (tag)
       if (const std::string extension = unsupportedRequiredExtension(*tag); !extension.empty())
         throwInputError(
             name_, "its model requires the 3MF extension " + extension + ", which toposlice does not read");
     DWORD unit = 0;
     check(NMR::lib3mf_model_getunit(model.get(), &unit), model.get(), "unit");
     setUnit(unit);
-    if (const std::optional<std::string> stated = statedUnit(bytes); stated && *stated != source_.unit)
+    if (const std::optional<std::string> stated = tag ? statedUnit(*tag) : std::nullopt;
+        stated && *stated != source_.unit)
       throwInputError(name_, "unknown 3MF unit '" + *stated +
                                  "' (a 3MF states micron, millimeter, centimeter, inch, foot or meter)");
 
