@@ -106,6 +106,65 @@ TEST_F(OutputSafety, InterruptedTemplateLeavesNoTableOrACompleteOne) {
   EXPECT_GT(stopped, 0) << "no run was stopped before its end: the delays are too long for this machine";
 }
 
+// An interrupted batch keeps the variants it completed (each with all of its outputs, whole) and the
+// table if it was saved, leaves no temporary and no folder it made without a file in it, and a re-run
+// finishes the job.
+TEST_F(OutputSafety, InterruptedBatchKeepsCompletedVariantsOnlyAndNoEmptyFolder) {
+  const fs::path model = sharedModel("derived/aligner_upper_case0.stl.gz");
+  const fs::path stage2 = sharedModel("derived/aligner_upper_case0_stage2.stl.gz");
+  if (!fs::exists(model) || !fs::exists(stage2)) GTEST_SKIP() << model << " not found";
+  writeBytes(path("job.json"),
+             "{\"template\": {\"model\": " + jsonString(model.string()) +
+                 ", \"table\": \"out/t/aligner.topo\"}, \"settings\": {\"layer_height\": 0.02, "
+                 "\"printer\": \"sl1\"}, \"variants\": [{\"name\": \"a\", \"model\": " +
+                 jsonString(model.string()) +
+                 ", \"contours\": \"out/a/a.cli\", \"masks\": \"out/a/a.sl1\"}, {\"name\": \"b\", "
+                 "\"model\": " +
+                 jsonString(stage2.string()) +
+                 ", \"contours\": \"out/b/b.cli\", \"masks\": \"out/b/b.sl1\"}]}");
+  int stopped = 0;
+  for (const auto delay : {10ms, 60ms, 150ms, 300ms, 600ms, 1000ms}) {
+    fs::remove_all(path("out"));
+    const pid_t pid = start({"batch", "job.json", "-q"});
+    std::this_thread::sleep_for(delay);
+    ::kill(pid, SIGTERM);
+    const RunResult r = finish(pid);
+    if (!r.signalled(SIGTERM)) {
+      ASSERT_EQ(r.code(), 0) << r.describe();  // done before the signal
+      continue;
+    }
+    ++stopped;
+    if (!r.err.empty()) {  // empty: stopped before the program set its handlers
+      EXPECT_TRUE(contains(r.err, "interrupted")) << r.describe();
+    }
+    // Every folder left holds a file; every file left is whole.
+    for (auto it = fs::recursive_directory_iterator(dir_); it != fs::recursive_directory_iterator(); ++it) {
+      const fs::path p = it->path();
+      EXPECT_EQ(p.filename().string().find(".tmp-"), std::string::npos)
+          << "a temporary left after " << delay.count() << " ms: " << p;
+      if (it->is_directory()) {
+        EXPECT_FALSE(fs::is_empty(p)) << "an empty folder left after " << delay.count() << " ms: " << p;
+      } else if (p.extension() == ".topo") {
+        EXPECT_TRUE(readBytes(p).starts_with(std::string("TOPOSLC", 7))) << p;
+      } else if (p.extension() == ".sl1") {
+        EXPECT_FALSE(zipEntryNames(readBytes(p)).empty()) << "not a whole archive: " << p;
+      }
+    }
+    // A variant's outputs are there together or not at all.
+    for (const char* v : {"a", "b"}) {
+      const fs::path folder = path("out") / v;
+      EXPECT_EQ(fs::exists(folder / (std::string(v) + ".cli")),
+                fs::exists(folder / (std::string(v) + ".sl1")))
+          << "variant " << v << " after " << delay.count() << " ms";
+    }
+  }
+  EXPECT_GT(stopped, 0) << "no run was stopped before its end: the delays are too long for this machine";
+  const RunResult again = run({"batch", "job.json", "-q"});
+  ASSERT_EQ(again.code(), 0) << again.describe();
+  for (const char* file : {"out/a/a.cli", "out/a/a.sl1", "out/b/b.cli", "out/b/b.sl1", "out/t/aligner.topo"})
+    EXPECT_TRUE(fs::exists(path(file))) << file;
+}
+
 // ---------------------------------------------------------------------------------------------------
 // 2. Several outputs are one unit.
 

@@ -62,12 +62,21 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
     t.table = buildTemplateTable(weldCorners(soup.corners, runner), runner);
     t.source = "built from " + job.templateModel.string();
     if (save && !job.templateFile.empty()) {
-      if (!job.templateFile.parent_path().empty())
-        std::filesystem::create_directories(job.templateFile.parent_path());
-      // Committed only when no stop signal has come: an interrupted batch saves no table.
-      OutputTransaction transaction;
-      writeTemplateFile(job.templateFile, t.table, false);
-      transaction.commit(&interruptRequested());
+      // Committed only when no stop signal has come: an interrupted batch saves no table, and takes away
+      // the folder it made for it when it holds nothing else.
+      MadeFolders made;
+      made.note(job.templateFile.parent_path());
+      try {
+        if (!job.templateFile.parent_path().empty())
+          std::filesystem::create_directories(job.templateFile.parent_path());
+        OutputTransaction transaction;
+        writeTemplateFile(job.templateFile, t.table, false);
+        transaction.commit(&interruptRequested());
+      } catch (...) {
+        made.removeEmpty();
+        throw;
+      }
+      made.removeEmpty();
       t.source += ", saved to " + job.templateFile.string();
     }
   } else {
