@@ -784,6 +784,52 @@ TEST_F(OptionChecks, TemplateWithTheClosestPointMethodIsAnError) {
             0);
 }
 
+// One file given twice among a model's features, or both added and removed, or the model as its own
+// feature, is a mistake: refused naming the file, in slice, batch and plate alike (through links too).
+TEST_F(OptionChecks, AFeatureFileGivenTwiceOrAsTheModelIsRefused) {
+  writeBytes(path("box.stl"), boxStl(5, 0, false));
+  writeBytes(path("tab.stl"), boxStl(2, 4, false));
+  fs::create_symlink(path("tab.stl"), path("link.stl"));
+  const std::string model = path("box.stl").string();
+  const struct {
+    std::vector<std::string> features;
+    const char* said;
+  } cases[] = {
+      {{"--add", "tab.stl", "--add", "tab.stl"}, "tab.stl: given twice as an add-on feature"},
+      {{"--remove", "tab.stl", "--remove", "link.stl"}, "link.stl: given twice as a removal feature"},
+      {{"--add", "tab.stl", "--remove", "link.stl"}, "given both as an add-on feature and as a removal"},
+      {{"--add", "box.stl"}, "box.stl: the model itself given as an add-on feature"},
+  };
+  for (const auto& c : cases) {
+    std::vector<std::string> args{"slice", model, "-H", "0.5", "-o", "c.cli", "-q"};
+    args.insert(args.end(), c.features.begin(), c.features.end());
+    const RunResult r = run(args);
+    expectOneErrorLine(r);
+    EXPECT_TRUE(contains(r.err, c.said)) << r.err;
+    EXPECT_FALSE(fs::exists(path("c.cli")));
+  }
+  EXPECT_EQ(run({"slice", model, "-H", "0.5", "-o", "c.cli", "-q", "--add", "tab.stl"}).code(), 0);
+
+  writeBytes(path("batch.json"), R"({"version": 1, "template": {"model": "box.stl"},
+      "settings": {"layer_height": 0.5},
+      "variants": [{"name": "v", "model": "box.stl", "contours": "v.cli", "add": ["tab.stl"],
+                    "remove": ["link.stl"]}]})");
+  const RunResult batch = run({"batch", "batch.json", "-q"});
+  expectOneErrorLine(batch);
+  EXPECT_TRUE(contains(batch.err, "variant 'v'") && contains(batch.err, "given both as an add-on"))
+      << batch.err;
+  EXPECT_FALSE(fs::exists(path("v.cli")));
+
+  writeBytes(path("plate.json"), R"({"version": 1, "printer": "sl1", "settings": {"layer_height": 0.5},
+      "parts": [{"name": "p", "model": "box.stl", "add": ["tab.stl", "link.stl"], "placement": "auto"}],
+      "outputs": {"contours": ["p.cli"]}})");
+  const RunResult plate = run({"plate", "plate.json", "-q"});
+  expectOneErrorLine(plate);
+  EXPECT_TRUE(contains(plate.err, "part 'p'") && contains(plate.err, "given twice as an add-on"))
+      << plate.err;
+  EXPECT_FALSE(fs::exists(path("p.cli")));
+}
+
 // A batch variant too large for the image was told to use --crop and --origin, which a batch job has
 // not: its own setting is named.
 TEST_F(OptionChecks, ABatchVariantThatDoesNotFitIsToldWhatTheJobCanDo) {

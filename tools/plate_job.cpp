@@ -657,6 +657,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
       try {
         const PlatePart& spec = job.parts[p];
         LoadedPart& part = loaded[p];
+        checkFeatureFiles(spec.model, spec.add, spec.remove);
         part.model = readMesh(spec.model, read);
         for (const auto* list : {&spec.add, &spec.remove})
           for (const auto& path : *list) part.features.push_back(readMesh(path, read));

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <iterator>
 #include <memory>
@@ -563,6 +564,38 @@ void checkNotAnInput(const std::filesystem::path& output, const std::vector<std:
   }
 }
 
+void checkFeatureFiles(const std::filesystem::path& model, const std::vector<std::filesystem::path>& add,
+                       const std::vector<std::filesystem::path>& remove) {
+  // Compared by device and inode (links and hard links too); a file that cannot be opened is left to
+  // the reader's message.
+  struct Seen {
+    std::filesystem::path path;
+    const char* role;
+    dev_t dev;
+    ino_t ino;
+  };
+  std::vector<Seen> seen;
+  const auto see = [&seen](const std::filesystem::path& path, const char* role) {
+    struct stat st {};
+    if (path.empty() || ::stat(path.c_str(), &st) != 0) return;
+    for (const Seen& s : seen) {
+      if (s.dev != st.st_dev || s.ino != st.st_ino) continue;
+      const std::string same = path == s.path ? "" : " (the same file as " + s.path.string() + ")";
+      if (std::strcmp(s.role, "model") == 0)
+        throw InputError(path.string() + ": the model itself given as " + role + same +
+                         "; a feature is another mesh");
+      if (std::strcmp(s.role, role) == 0)
+        throw InputError(path.string() + ": given twice as " + role + same + "; give each feature once");
+      throw InputError(path.string() + ": given both as " + s.role + " and as " + role + same +
+                       "; a feature is added or removed, not both");
+    }
+    seen.push_back({path, role, st.st_dev, st.st_ino});
+  };
+  see(model, "model");
+  for (const auto& f : add) see(f, "an add-on feature");
+  for (const auto& f : remove) see(f, "a removal feature");
+}
+
 std::string maskOutputKinds() {
   return ".sl1, .sl1s, .goo, .nanodlp, .exr, .vdb, or a folder of PNGs (a name without an extension)";
 }
@@ -732,6 +765,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const std::vector<std::filesystem::path> inputs = allInputs(model, options);
   for (const auto& output : allOutputs(options)) checkNotAnInput(output, inputs);
   validateSliceOptions(options);
+  checkFeatureFiles(model, options.add, options.remove);
   checkDistinctOutputs(options);
   // An output that may not be written (it exists and there is no --force, or it is not toposlice's to
   // replace) is refused before the model is read, not after the work; each writer checks again when it

@@ -97,6 +97,12 @@ std::string maskOutputKinds();
 // `inputs`: a job never writes over its own input, even with --force.
 void checkNotAnInput(const std::filesystem::path& output, const std::vector<std::filesystem::path>& inputs);
 
+// Throws InputError when one file is given twice among a model's features (`add`, then `remove`), or
+// as a feature of itself (`model`), through links too: a feature added twice or both added and removed
+// is a mistake in the command or the job, not a shape.
+void checkFeatureFiles(const std::filesystem::path& model, const std::vector<std::filesystem::path>& add,
+                       const std::vector<std::filesystem::path>& remove);
+
 // Runs one slicing job. Its outputs form one OutputTransaction (io/output_file.h): they appear together
 // when everything succeeded, or not at all. Refused before anything is read: an output that is an input,
 // two outputs with the same path, bad numbers. Refused after slicing, before anything appears: no layer,
