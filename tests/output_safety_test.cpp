@@ -751,13 +751,19 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
     EXPECT_TRUE(contains(r.err, "toposlice: error: --z: the planes must be strictly increasing")) << r.err;
   }
   EXPECT_FALSE(fs::exists(path("-q")));
-  // The preview is fitted to the model: --units and --scale would change nothing in it.
+  // The preview is fitted to the model, a template's table is its connectivity: --units and --scale
+  // would change nothing in either.
   for (const char* opt : {"--units", "--scale"}) {
     const RunResult r =
         run({"preview", examplePart().string(), "-o", "p.png", opt, opt[2] == 'u' ? "in" : "2", "-q"});
     expectOneErrorLine(r);
     EXPECT_TRUE(contains(r.err, std::string(opt) + " does nothing in preview")) << r.err;
     EXPECT_FALSE(fs::exists(path("p.png")));
+    const RunResult t =
+        run({"template", examplePart().string(), "-o", "t.topo", opt, opt[2] == 'u' ? "in" : "2", "-q"});
+    expectOneErrorLine(t);
+    EXPECT_TRUE(contains(t.err, std::string(opt) + " does nothing in template")) << t.err;
+    EXPECT_FALSE(fs::exists(path("t.topo")));
   }
   const RunResult wrapped =
       run({"preview", examplePart().string(), "-o", "p.png", "--size", "4294967297x10", "-q"});

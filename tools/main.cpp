@@ -646,13 +646,16 @@ int run(int argc, char** argv) {
     // plate may be committing another variant's or plate's outputs meanwhile).
     stopAtOnceWhileReading().store(*info || *preview || *templ || *slice);
     if (*info) return runInfo(model, meshReadOptions(common), common.quiet);
-    if (*preview) {
-      // The picture is fitted to the model: a length unit or a scale changes nothing in it.
+    // A length unit or a scale changes nothing in a preview (the picture is fitted to the model) or in a
+    // template's table (the mesh's connectivity): refused there, as options that cannot apply.
+    for (const auto& [command, what] :
+         {std::pair<CLI::App*, const char*>{preview, "the picture is fitted to the model"},
+          {templ, "the table holds the mesh's connectivity, not its size"}})
       for (const char* opt : {"--units", "--scale"})
-        if (preview->count(opt) > 0)
-          throw InputError(std::string(opt) + " does nothing in preview: the picture is fitted to the model");
+        if (*command && command->count(opt) > 0)
+          throw InputError(std::string(opt) + " does nothing in " + command->get_name() + ": " + what);
+    if (*preview)
       return runPreview(model, meshReadOptions(common), previewOut, previewSize, previewForce, common.quiet);
-    }
     if (*templ) return runTemplate(model, meshReadOptions(common), templateOut, templateForce, common.quiet);
     if (*plate)
       return plateExplain ? explainPlateSettings(plateJobPath, plateOutputDir)
