@@ -13,6 +13,10 @@ namespace toposlice {
 
 using ChunkBody = std::function<void(std::size_t begin, std::size_t end)>;
 
+// The most worker threads a job may ask for (--threads, a job file's "threads"; 0 means all cores): a
+// count beyond any machine is a typing mistake.
+inline constexpr unsigned kMaxThreads = 4096;
+
 struct ChunkRunner {
   // Calls body(begin, end) on disjoint chunks covering [0, count), each about `grain` indices long.
   std::function<void(std::size_t count, std::size_t grain, const ChunkBody& body)> run;

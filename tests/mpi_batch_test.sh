@@ -191,6 +191,12 @@ timeout 60 mpirun --allow-run-as-root --oversubscribe --bind-to none -np 1 \
 rc_d=$?
 check "--dispatch-only on 1 rank: refused (exit 2), got $rc_d" test "$rc_d" -eq 2
 check "--dispatch-only on 1 rank: says why" grep -q "^toposlice-mpi: error: --dispatch-only .* no other rank" "$tmp/D.out"
+timeout 60 mpirun --allow-run-as-root --oversubscribe --bind-to none -np 1 \
+  --mca btl self,tcp --mca btl_tcp_if_include lo --mca oob_tcp_if_include lo \
+  "$mpi" batch "$tmp/C/job.json" --threads 5000 >"$tmp/T.out" 2>&1
+rc_t=$?
+check "--threads 5000: refused (exit 2) as in job files, got $rc_t" test "$rc_t" -eq 2
+check "--threads 5000: names the bound" grep -q "^toposlice-mpi: error: --threads: must be between 0 (all cores) and 4096" "$tmp/T.out"
 
 # A plate job: the four arches of examples/plate on a 70 x 40 mm plate, one arch per plate, with print
 # settings (scaling along the plate's x, absolute correction, elephant foot, exposure). The same job

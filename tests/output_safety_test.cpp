@@ -751,6 +751,12 @@ TEST_F(OptionChecks, BadNumbersAreRefusedNamingTheOption) {
     EXPECT_TRUE(contains(r.err, "toposlice: error: --z: the planes must be strictly increasing")) << r.err;
   }
   EXPECT_FALSE(fs::exists(path("-q")));
+  // --threads has the job files' bound ("threads": 0 to 4096).
+  const RunResult threads = run({"slice", examplePart().string(), "-o", "a.cli", "--threads", "5000", "-q"});
+  EXPECT_EQ(threads.code(), 2) << threads.describe();
+  EXPECT_TRUE(contains(threads.err, "--threads: must be between 0 (all cores) and 4096, got 5000"))
+      << threads.err;
+  EXPECT_FALSE(fs::exists(path("a.cli")));
   // The preview is fitted to the model, a template's table is its connectivity: --units and --scale
   // would change nothing in either.
   for (const char* opt : {"--units", "--scale"}) {

@@ -13,6 +13,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "core/chunk_runner.h"
 #include "core/slicing/planes.h"
 #include "io/errors.h"
 #include "io/jobs/json_reader.h"
@@ -124,7 +125,7 @@ class JobParser : public JsonReader {
     if (const Json* x = find(*v, "antialias")) job_.antialias = boolean(*x, key("antialias"));
     if (const Json* x = find(*v, "cli_binary")) job_.cliBinary = boolean(*x, key("cli_binary"));
     if (const Json* x = find(*v, "threads"))
-      job_.threads = static_cast<uint32_t>(whole(*x, key("threads"), 0, 4096));
+      job_.threads = static_cast<uint32_t>(whole(*x, key("threads"), 0, kMaxThreads));
     if (const Json* x = find(*v, "overwrite")) job_.overwrite = boolean(*x, key("overwrite"));
     if (const Json* x = find(*v, "fix_orientation"))
       job_.fixOrientation = boolean(*x, key("fix_orientation"));

@@ -1,5 +1,6 @@
 #include "io/jobs/plate_job_file.h"
 
+#include "core/chunk_runner.h"
 #include "io/jobs/batch_job.h"  // kBatchMaskExtensions: every mask format but the PNG folder
 #include "io/jobs/json_reader.h"
 #include "io/jobs/profile.h"
@@ -104,7 +105,7 @@ class PlateParser : public JsonReader {
     if (const Json* x = find(v, "antialias")) job_.antialias = boolean(*x, key("antialias"));
     if (const Json* x = find(v, "cli_binary")) job_.cliBinary = boolean(*x, key("cli_binary"));
     if (const Json* x = find(v, "threads"))
-      job_.threads = static_cast<uint32_t>(whole(*x, key("threads"), 0, 4096));
+      job_.threads = static_cast<uint32_t>(whole(*x, key("threads"), 0, kMaxThreads));
     if (const Json* x = find(v, "overwrite")) job_.overwrite = boolean(*x, key("overwrite"));
     if (const Json* x = find(v, "units")) job_.unitMm = unitsMm(*x, key("units"));
     if (const Json* x = find(v, "scale")) job_.scale = positive(*x, key("scale"));
