@@ -766,6 +766,43 @@ TEST(MeshReader, ThreeMfBrokenModelPartsAreNamed) {
   }
 }
 
+// A package holding two parts of one name (or of names OPC takes as one: case is ignored) does not say
+// what its model is: libzip and lib3mf read the first, other readers the last. It was read as the first.
+TEST(MeshReader, ThreeMfPartsNamedTwiceAreRefused) {
+  fixtures::ScratchDir dir;
+  const auto withPart = [&](const char* added) {
+    writeThreeMfCube(dir / "two.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);
+    int err = 0;
+    zip_t* zip = zip_open((dir / "two.3mf").c_str(), 0, &err);
+    ASSERT_NE(zip, nullptr);
+    static const char kOther[] = "<?xml version=\"1.0\"?><model unit=\"millimeter\"/>";
+    zip_source_t* source = zip_source_buffer(zip, kOther, sizeof kOther - 1, 0);
+    ASSERT_GE(zip_file_add(zip, added, source, 0), 0);
+    ASSERT_EQ(zip_close(zip), 0);
+  };
+  const std::string name = (dir / "two.3mf").string();
+  withPart("3D/3DMODEL.MODEL");
+  EXPECT_EQ(errorOf([&] { readMesh(dir / "two.3mf"); }),
+            name +
+                ": not a valid 3MF file: its package holds two parts named 3D/3DMODEL.MODEL, and readers "
+                "differ in which one they read");
+  // The same name byte for byte: libzip cannot write it, so the added part's name is changed in the bytes.
+  withPart("3D/3dmodel.modeX");
+  std::string bytes = fixtures::readFile(dir / "two.3mf");
+  std::size_t renamed = 0;
+  for (std::size_t at = bytes.find("3D/3dmodel.modeX"); at != std::string::npos;
+       at = bytes.find("3D/3dmodel.modeX", at + 1), ++renamed)
+    bytes[at + 15] = 'l';
+  ASSERT_EQ(renamed, 2u);  // the local header and the central directory
+  writeFile(dir / "two.3mf", bytesOf(bytes));
+  EXPECT_EQ(errorOf([&] { readMesh(dir / "two.3mf"); }),
+            name +
+                ": not a valid 3MF file: its package holds two parts named 3D/3dmodel.model, and readers "
+                "differ in which one they read");
+  withPart("3D/other.model");  // another part beside the model is fine
+  EXPECT_EQ(readMesh(dir / "two.3mf").facetCount(), 12u);
+}
+
 TEST(MeshReader, ThreeMfDamagedPackage) {
   fixtures::ScratchDir dir;
   writeThreeMfCube(dir / "cube.3mf", NMR::MODELUNIT_MILLIMETER, translation(0, 0, 0), false);

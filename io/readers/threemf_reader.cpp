@@ -94,6 +94,34 @@ std::string zipEntryText(std::span<const std::byte> bytes, const std::string& en
   return text;
 }
 
+// The name of a part the zip `bytes` holds twice, empty when none is (or it cannot be opened: lib3mf
+// says why then). Part names are compared as OPC compares them, ASCII case ignored: readers differ in
+// which of two parts of one name they read (libzip the first, others the last), so the package does not
+// say what its model is.
+std::string twiceNamedEntry(std::span<const std::byte> bytes) {
+  zip_error_t error;
+  zip_error_init(&error);
+  zip_source_t* source = zip_source_buffer_create(bytes.data(), bytes.size(), 0, &error);
+  zip_t* archive = source != nullptr ? zip_open_from_source(source, ZIP_RDONLY, &error) : nullptr;
+  std::string twice;
+  if (archive == nullptr) {
+    if (source != nullptr) zip_source_free(source);
+  } else {
+    std::map<std::string, std::string> seen;  // lower case -> as named
+    const zip_int64_t count = zip_get_num_entries(archive, 0);
+    for (zip_int64_t i = 0; i < count && twice.empty(); ++i) {
+      const char* name = zip_get_name(archive, static_cast<zip_uint64_t>(i), ZIP_FL_ENC_RAW);
+      if (name == nullptr) continue;
+      std::string key = name;
+      for (char& c : key) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+      if (!seen.emplace(key, name).second) twice = name;
+    }
+    zip_discard(archive);
+  }
+  zip_error_fini(&error);
+  return twice;
+}
+
 // Whether the zip `bytes` holds the entry `entry`.
 bool zipHasEntry(std::span<const std::byte> bytes, const std::string& entry) {
   zip_error_t error;
@@ -602,6 +630,9 @@ FacetSoup parseThreeMf(std::span<const std::byte> bytes, const std::string& name
   ThreeMfSource& out = source ? *source : local;
   out = ThreeMfSource{};
   FacetSoup soup;
+  if (const std::string twice = twiceNamedEntry(bytes); !twice.empty())
+    throwInputError(name, "not a valid 3MF file: its package holds two parts named " + twice +
+                              ", and readers differ in which one they read");
   const std::vector<std::byte> repaired = withoutMissingParts(bytes, rootModelEntry(bytes));
   Reader(name, factor, out, soup).read(repaired.empty() ? bytes : std::span<const std::byte>(repaired));
   return soup;
