@@ -842,6 +842,39 @@ TEST_F(OptionChecks, AFeatureFileGivenTwiceOrAsTheModelIsRefused) {
   EXPECT_FALSE(fs::exists(path("p.cli")));
 }
 
+// An image side beyond 100000 pixels is one bound wherever the size is given: --resolution, a batch's or a
+// plate's settings.resolution, a profile's display_pixels_x/y (a batch took 5000000 x 300 and sliced it).
+TEST_F(OptionChecks, ImageSizesHaveOneBoundEverywhere) {
+  const std::string part = examplePart().string();
+  const RunResult cli = run({"slice", part, "-H", "1", "--masks", "m.sl1", "--printer", "generic-4k",
+                             "--pixel", "0.05", "--resolution", "100001x300", "-q"});
+  expectOneErrorLine(cli);
+  EXPECT_TRUE(contains(cli.err, "--resolution '100001x300': expected WxH in pixels, each 1 to 100000"))
+      << cli.err;
+  writeBytes(path("batch.json"), R"({"version": 1, "template": {"model": ")" + part + R"("},
+      "settings": {"layer_height": 1, "printer": "generic-4k", "pixel": 0.05, "resolution": [100001, 300]},
+      "variants": [{"name": "v", "model": ")" +
+                                     part + R"(", "masks": "v.sl1"}]})");
+  const RunResult batch = run({"batch", "batch.json", "-q"});
+  expectOneErrorLine(batch);
+  EXPECT_TRUE(contains(batch.err, "settings.resolution[0]: must be between 1 and 100000, got 100001"))
+      << batch.err;
+  writeBytes(path("plate.json"), R"({"version": 1, "printer": "generic-4k",
+      "settings": {"layer_height": 1, "pixel": 0.05, "resolution": [300, 100001]},
+      "parts": [{"name": "p", "model": ")" +
+                                     part + R"(", "placement": "auto"}], "outputs": {"masks": "p.sl1"}})");
+  const RunResult plate = run({"plate", "plate.json", "-q"});
+  expectOneErrorLine(plate);
+  EXPECT_TRUE(contains(plate.err, "settings.resolution[1]: must be between 1 and 100000, got 100001"))
+      << plate.err;
+  writeBytes(path("wide.json"), R"({"printers": {"wide": {"inherits": "sl1", "display_pixels_x": 100001}}})");
+  const RunResult profile = run(
+      {"slice", part, "-H", "1", "--masks", "m.sl1", "--profile", "wide.json", "--printer", "wide", "-q"});
+  expectOneErrorLine(profile);
+  EXPECT_TRUE(contains(profile.err, "display_pixels_x")) << profile.err;
+  EXPECT_EQ(entries(dir_), (std::vector<std::string>{"batch.json", "plate.json", "wide.json"}));
+}
+
 // A batch variant too large for the image was told to use --crop and --origin, which a batch job has
 // not: its own setting is named.
 TEST_F(OptionChecks, ABatchVariantThatDoesNotFitIsToldWhatTheJobCanDo) {

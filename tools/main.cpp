@@ -722,9 +722,9 @@ int run(int argc, char** argv) {
     if (maskPath.filename() == "." || maskPath.filename() == "..") maskPath = resolvedPath(maskPath);
     if (!resolution.empty()) {
       uint32_t w = 0, h = 0;
-      if (!parsePixelSize(resolution, 100000, w, h))
-        throw InputError("--resolution '" + resolution +
-                         "': expected WxH in pixels, each 1 to 100000, e.g. 2560x1440");
+      if (!parsePixelSize(resolution, kMaxImageSide, w, h))
+        throw InputError("--resolution '" + resolution + "': expected WxH in pixels, each 1 to " +
+                         std::to_string(kMaxImageSide) + ", e.g. 2560x1440");
       options.masks.resolution = std::pair<uint32_t, uint32_t>{w, h};
     }
     if (!origin.empty()) {

@@ -9,6 +9,11 @@
 
 namespace toposlice {
 
+// The widest and tallest mask image, in pixels, wherever its size is given (--resolution, a job's
+// settings.resolution, a profile's display_pixels_x/y): beyond any display made, so a larger number is a
+// mistake.
+inline constexpr uint32_t kMaxImageSide = 100000;
+
 struct PrinterPreset {
   const char* name;
   uint32_t width, height;  // pixels

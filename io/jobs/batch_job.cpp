@@ -14,6 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/chunk_runner.h"
+#include "core/print/printer.h"
 #include "core/slicing/planes.h"
 #include "io/errors.h"
 #include "io/jobs/json_reader.h"
@@ -118,8 +119,8 @@ class JobParser : public JsonReader {
     if (const Json* x = find(*v, "resolution")) {
       if (!x->is_array() || x->size() != 2) wrongType(*x, key("resolution"), "[width, height] in pixels");
       job_.resolution = {
-          static_cast<uint32_t>(whole((*x)[0], indexPath(key("resolution"), 0), 1, UINT32_MAX)),
-          static_cast<uint32_t>(whole((*x)[1], indexPath(key("resolution"), 1), 1, UINT32_MAX))};
+          static_cast<uint32_t>(whole((*x)[0], indexPath(key("resolution"), 0), 1, kMaxImageSide)),
+          static_cast<uint32_t>(whole((*x)[1], indexPath(key("resolution"), 1), 1, kMaxImageSide))};
     }
     if (const Json* x = find(*v, "mirror")) mirror(*x, key("mirror"), job_.mirrorX, job_.mirrorY);
     if (const Json* x = find(*v, "antialias")) job_.antialias = boolean(*x, key("antialias"));

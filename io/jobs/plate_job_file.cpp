@@ -1,6 +1,7 @@
 #include "io/jobs/plate_job_file.h"
 
 #include "core/chunk_runner.h"
+#include "core/print/printer.h"
 #include "io/jobs/batch_job.h"  // kBatchMaskExtensions: every mask format but the PNG folder
 #include "io/jobs/json_reader.h"
 #include "io/jobs/profile.h"
@@ -94,8 +95,9 @@ class PlateParser : public JsonReader {
     if (const Json* x = find(v, "pixel")) job_.pixel = positive(*x, key("pixel"));
     if (const Json* x = find(v, "resolution")) {
       if (!x->is_array() || x->size() != 2) wrongType(*x, key("resolution"), "[width, height] in pixels");
-      job_.resolution = {static_cast<uint32_t>(whole((*x)[0], indexPath(key("resolution"), 0), 1, 1u << 20)),
-                         static_cast<uint32_t>(whole((*x)[1], indexPath(key("resolution"), 1), 1, 1u << 20))};
+      job_.resolution = {
+          static_cast<uint32_t>(whole((*x)[0], indexPath(key("resolution"), 0), 1, kMaxImageSide)),
+          static_cast<uint32_t>(whole((*x)[1], indexPath(key("resolution"), 1), 1, kMaxImageSide))};
     }
     if (const Json* x = find(v, "build_height")) {
       job_.buildHeight = number(*x, key("build_height"));

@@ -115,8 +115,8 @@ const SettingKey kKeys[] = {
 
 KeyRule ruleOf(std::string_view key) {
   if (key == "printer_model") return text(TS_TEXT(printerModel));
-  if (key == "display_pixels_x") return count(1, 1 << 20, TS_COUNT(pixelsX));
-  if (key == "display_pixels_y") return count(1, 1 << 20, TS_COUNT(pixelsY));
+  if (key == "display_pixels_x") return count(1, kMaxImageSide, TS_COUNT(pixelsX));
+  if (key == "display_pixels_y") return count(1, kMaxImageSide, TS_COUNT(pixelsY));
   if (key == "display_width") return number(0, false, 1e5, TS_NUMBER(displayWidth));
   if (key == "display_height") return number(0, false, 1e5, TS_NUMBER(displayHeight));
   if (key == "display_orientation") return text(TS_TEXT(orientation));
