@@ -114,8 +114,9 @@ cInt roundToUnits(double mm) {
 }
 
 // ClipperLib::CleanPolygon (Clipper 6.4.2), re-derived on index links instead of a heap-allocated
-// node list: the same tests in the same order, so the same points (a visit whose triangle clearly turns
-// skips them: clearlyTurns). Appends the cleaned loop to `out`.
+// node list: the same tests in the same order (a visit whose triangle clearly turns skips them:
+// clearlyTurns), and a point near the line of its neighbours dropped only where every point dropped
+// between them stays near it (dropsStayNear). Appends the cleaned loop to `out`.
 // Growing and shrinking both clean with it.
 class LoopCleaner {
  public:
@@ -145,7 +146,8 @@ class LoopCleaner {
         exclude(next_[op]);
         op = exclude(op);
         size -= 2;
-      } else if (nearlyCollinear(before, p, after, distSqrd)) {
+      } else if (nearlyCollinear(before, p, after, distSqrd) &&
+                 dropsStayNear(in, prev_[op], next_[op], distSqrd)) {
         op = exclude(op);
         --size;
       } else {
@@ -181,6 +183,22 @@ class LoopCleaner {
     const double x3 = x1 + x2, y3 = y1 + y2;
     const double longest = std::max({x1 * x1 + y1 * y1, x2 * x2 + y2 * y2, x3 * x3 + y3 * y3});
     return twiceArea * twiceArea > distSqrd * longest * (1 + 1e-6);
+  }
+
+  // Whether every input point after `from` and before `to` (the points dropped between two kept ones,
+  // and the one tested) lies within the distance of the line through in[from] and in[to]. Clipper's
+  // rule tests the one point against its neighbours as they are then, so that on a finely drawn curve
+  // each drop let the next one go a little farther (a 4,000-sided circle of 5 mm came out 30 um inside
+  // after cleaning): measured against every point it replaces, the outline moves by at most the distance.
+  // A stretch longer than kMaxDropped points is not shortened further (a long straight wall, drawn in
+  // many points, then costs the offset more points, not this test a quadratic time).
+  static constexpr std::size_t kMaxDropped = 256;
+  static bool dropsStayNear(std::span<const IntPoint> in, uint32_t from, uint32_t to, double distSqrd) {
+    const std::size_t n = in.size();
+    std::size_t count = 0;
+    for (std::size_t i = from + 1 == n ? 0 : from + 1; i != to; i = i + 1 == n ? 0 : i + 1)
+      if (++count > kMaxDropped || !nearLine(in[i], in[from], in[to], distSqrd)) return false;
+    return true;
   }
 
   static bool close(const IntPoint& a, const IntPoint& b, double distSqrd) {

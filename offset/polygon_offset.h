@@ -13,8 +13,11 @@
 //   self-intersections, outer loops counter-clockwise (positive area), holes clockwise, no two loops
 //   overlapping. Parts that an inward offset removes (walls thinner than twice the distance) vanish.
 // - Before an offset, vertices closer than 0.5 um to their neighbours or to the line through them are
-//   dropped (ClipperLib::CleanPolygons' rule, re-derived): the outline moves by at most 0.5 um, far below
-//   a pixel, and the offset of a dense mesh's outline costs about a third less.
+//   dropped (ClipperLib::CleanPolygons' rule, re-derived, with one more condition: a vertex near the
+//   line of its neighbours goes only when every vertex dropped between them is near that line too,
+//   and at most 256 go between two kept ones): the outline moves by at most 0.5 um, far below a pixel,
+//   and the offset of a dense mesh's outline costs about a third less. (Clipper's rule alone lets drop
+//   after drop wander: a 4,000-sided circle of 5 mm lost up to 30 um.)
 // - Corners use mitred joins with a miter limit of 3 (PrusaSlicer's default for offset_ex): a box grown
 //   by d stays a box, (a + 2d) x (b + 2d); corners sharper than about 39 degrees are squared off.
 // - Offsets use raw offset loops: ClipperOffset's points (re-derived: outline cleaning, orientation
