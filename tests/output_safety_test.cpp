@@ -875,6 +875,18 @@ TEST_F(OptionChecks, ImageSizesHaveOneBoundEverywhere) {
   EXPECT_EQ(entries(dir_), (std::vector<std::string>{"batch.json", "plate.json", "wide.json"}));
 }
 
+// A pixel size of many decimals with --resolution: its display_width and _height, recorded in whole
+// nanometres, differed in the last digit per pixel and the job was refused as having pixels that are not
+// square.
+TEST_F(OptionChecks, AGivenPixelOfManyDecimalsIsSquare) {
+  const RunResult r =
+      run({"slice", examplePart().string(), "-H", "1", "--masks", "m.sl1", "--printer", "generic-4k",
+           "--pixel", "0.0123456789", "--resolution", "1000x900", "--crop", "--summary", "s.json", "-q"});
+  EXPECT_EQ(r.code(), 0) << r.describe();
+  const auto summary = nlohmann::json::parse(readBytes(path("s.json")));
+  EXPECT_EQ(summary["print_settings"]["values"]["display_width"], "12.345679") << summary.dump(2);
+}
+
 // A batch variant too large for the image was told to use --crop and --origin, which a batch job has
 // not: its own setting is named.
 TEST_F(OptionChecks, ABatchVariantThatDoesNotFitIsToldWhatTheJobCanDo) {

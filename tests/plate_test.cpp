@@ -433,7 +433,12 @@ TEST_F(PlateTest, ProblemsWithGivenPlacementsNameTheParts) {
     EXPECT_NE(what.find("parts 'left' and 'right' overlap"), std::string::npos) << what;
     EXPECT_NE(what.find("part 'edge' (x"), std::string::npos) << what;
     EXPECT_NE(what.find("sticks out of the printable area"), std::string::npos) << what;
-    EXPECT_NE(what.find("part 'left' is 10.886 mm tall, 2.886 mm taller"), std::string::npos) << what;
+    // The plate's layers start at the lower of the two aligners' bottoms (stage 2's): measured from there.
+    EXPECT_NE(what.find("part 'left' reaches 10.941 mm above the bottom of its plate's layers (z -3.597 mm), "
+                        "2.941 mm beyond the printer's build height of 8.000 mm"),
+              std::string::npos)
+        << what;
+    EXPECT_NE(what.find("part 'right' is 10.946 mm tall, 2.946 mm taller"), std::string::npos) << what;
   }
   EXPECT_FALSE(fs::exists(dir_ / "r.json"));
 }
@@ -477,6 +482,126 @@ TEST_F(PlateTest, GivenPlacementsAreMeasuredOnTheParts) {
         << e.what();
   }
   EXPECT_FALSE(fs::exists(dir_ / "p.cli"));
+}
+
+// A positive absolute_correction grows every part as it prints: given placements keep the spacing
+// plus twice the correction between parts and the correction from the plate's edges, and auto parts
+// are nested with that room (parts fused, or were cut at the plate's edge, without a word).
+TEST_F(PlateTest, APositiveCorrectionKeepsTheSpacingAndTheEdges) {
+  writeBinaryStl(dir_ / "a.stl", fixtures::box(0, 0, 0, 10, 5, 3), "box", false);
+  const auto given = [&](double x, double gap, double correction) {
+    return "{\"print_settings\": {\"absolute_correction\": " + std::to_string(correction) +
+           "}, \"settings\": {\"layer_height\": 1, \"pixel\": 0.05, \"resolution\": [2000, 1000]}, "
+           "\"arrange\": {\"spacing\": 2}, \"parts\": [{\"name\": \"a\", \"model\": \"a.stl\", "
+           "\"placement\": {\"x\": " +
+           std::to_string(x) +
+           ", \"y\": 20}}, {\"name\": \"b\", \"model\": \"a.stl\", \"placement\": {\"x\": " +
+           std::to_string(x + 10 + gap) + ", \"y\": 20}}], \"outputs\": {\"contours\": [\"p.cli\"]}}";
+  };
+  const auto refusal = [&](const std::string& text) {
+    try {
+      runPlateJob(job(text), nullptr);
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    fs::remove(dir_ / "p.cli");
+    return std::string("accepted");
+  };
+  EXPECT_EQ(refusal(given(20, 2.1, 0)), "accepted");
+  EXPECT_NE(refusal(given(20, 2.1, 0.1))
+                .find("parts 'a' and 'b' are 2.100 mm apart, closer than the spacing of "
+                      "2.000 mm plus twice the absolute_correction of 0.100 mm"),
+            std::string::npos);
+  EXPECT_EQ(refusal(given(20, 2.25, 0.1)), "accepted");
+  EXPECT_EQ(refusal(given(5.05, 3, 0)), "accepted");  // 0.05 mm from the edge
+  EXPECT_NE(
+      refusal(given(5.05, 3, 0.1))
+          .find("part 'a' (x 0.050 mm .. 10.050 mm, y 17.500 mm .. 22.500 mm) with its absolute_correction "
+                "of 0.100 mm (each part grows by it) sticks out of the printable area (100.000 mm x "
+                "50.000 mm) by 0.050 mm"),
+      std::string::npos);
+  // Auto: a 96 mm bar on a 100 mm plate with no margin, grown by 1 mm; and two bars 1 + 2 x 0.5 mm apart.
+  writeBinaryStl(dir_ / "bar.stl", fixtures::box(0, 0, 0, 96, 20, 2), "bar", false);
+  const PlateResult one = runPlateJob(
+      job(R"({"print_settings": {"absolute_correction": 1}, "settings": {"layer_height": 1, "pixel": 0.05,
+          "resolution": [2000, 1000]}, "arrange": {"spacing": 1, "margin": 0},
+          "parts": [{"name": "bar", "model": "bar.stl", "placement": "auto"}], "outputs": {"contours": ["q.cli"]}})"),
+      nullptr);
+  ASSERT_EQ(one.plates, 1u);
+  const BoundingBox b = one.parts[0].bounds;
+  EXPECT_GE(b.min.x, 1 - 1e-4);
+  EXPECT_GE(b.min.y, 1 - 1e-4);
+  EXPECT_LE(b.max.x, 99 + 1e-4);
+  EXPECT_LE(b.max.y, 49 + 1e-4);
+  writeBinaryStl(dir_ / "slab.stl", fixtures::box(0, 0, 0, 40, 20, 2), "slab", false);
+  const PlateResult two = runPlateJob(
+      job(R"({"print_settings": {"absolute_correction": 0.5}, "settings": {"layer_height": 1, "pixel": 0.05,
+          "resolution": [2000, 1000]}, "arrange": {"spacing": 1, "margin": 0},
+          "parts": [{"name": "s", "model": "slab.stl", "placement": "auto"},
+                    {"name": "t", "model": "slab.stl", "placement": "auto"}], "outputs": {"contours": ["r.cli"]}})"),
+      nullptr);
+  ASSERT_EQ(two.plates, 1u);
+  const BoundingBox s = two.parts[0].bounds, t = two.parts[1].bounds;
+  const double apart = std::max({t.min.x - s.max.x, s.min.x - t.max.x, t.min.y - s.max.y, s.min.y - t.max.y});
+  EXPECT_GE(apart, 2 - 1e-4);
+}
+
+// The plate's layers start at the lowest bottom of its parts (or settings.z0): a part that starts higher
+// is measured from there against the build height (a part floating 145 mm up made a 153 mm stack on a
+// 150 mm printer without a word).
+TEST_F(PlateTest, TheBuildHeightIsMeasuredFromThePlatesBottom) {
+  writeBinaryStl(dir_ / "low.stl", fixtures::box(0, 0, 0, 10, 10, 8), "low", false);
+  writeBinaryStl(dir_ / "high.stl", fixtures::box(0, 0, 145, 10, 10, 153), "high", false);
+  try {
+    runPlateJob(job(R"({"printer": "sl1", "settings": {"layer_height": 0.5},
+        "parts": [{"name": "low", "model": "low.stl", "placement": "auto"},
+                  {"name": "high", "model": "high.stl", "placement": "auto"}], "outputs": {"contours": ["p.cli"]}})"),
+                nullptr);
+    ADD_FAILURE() << "accepted";
+  } catch (const InputError& e) {
+    EXPECT_NE(
+        std::string(e.what()).find("part 'high' reaches 153.000 mm above the bottom of its plate's layers "
+                                   "(z 0.000 mm), 3.000 mm beyond the printer's build height of 150.000 mm"),
+        std::string::npos)
+        << e.what();
+    EXPECT_EQ(std::string(e.what()).find("part 'low'"), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(fs::exists(dir_ / "p.cli"));
+}
+
+// settings.resolution, settings.pixel and settings.build_height are the plate's display and height:
+// --explain and the report's print_settings give them, naming the setting (they gave the preset's).
+TEST_F(PlateTest, TheJobsDisplaySettingsAreTheReportedOnes) {
+  writeBinaryStl(dir_ / "a.stl", fixtures::box(0, 0, 0, 10, 5, 3), "box", false);
+  const std::string text = R"({"version": 1, "printer": "sl1", "settings": {"layer_height": 1, "pixel": 0.05,
+      "resolution": [2000, 1200], "build_height": 20},
+      "parts": [{"name": "a", "model": "a.stl", "placement": "auto"}], "outputs": {"masks": "p.sl1", "report": "r.json"}})";
+  tool_test::writeBytes(dir_ / "job.json", text);
+  const auto explained = run({"plate", "job.json", "--explain"});
+  ASSERT_EQ(explained.code(), 0) << explained.describe();
+  for (const char* line : {"display_pixels_x           = 2000         (settings.resolution)",
+                           "display_width              = 100          (settings.pixel)",
+                           "max_print_height           = 20           (settings.build_height)"})
+    EXPECT_NE(explained.out.find(line), std::string::npos) << line << "\n" << explained.out;
+  ASSERT_EQ(run({"plate", "job.json", "-q"}).code(), 0);
+  const nlohmann::json report = nlohmann::json::parse(readBytes(dir_ / "r.json"));
+  const auto& settings = report.at("print_settings");
+  EXPECT_EQ(settings.at("values").at("display_pixels_y"), "1200");
+  EXPECT_EQ(settings.at("values").at("display_height"), "60");
+  EXPECT_EQ(settings.at("values").at("max_print_height"), "20");
+  EXPECT_EQ(settings.at("set_by").at("display_height"), "settings.pixel");
+  // A batch job's settings.resolution and settings.pixel, in its --explain.
+  tool_test::writeBytes(dir_ / "batch.json", R"({"version": 1, "template": {"model": "a.stl"},
+      "settings": {"layer_height": 1, "printer": "sl1", "resolution": [2000, 1200]},
+      "variants": [{"name": "v", "model": "a.stl", "masks": "v.sl1"}]})");
+  const auto batch = run({"batch", "batch.json", "--explain"});
+  ASSERT_EQ(batch.code(), 0) << batch.describe();
+  EXPECT_NE(batch.out.find("display_pixels_y           = 1200         (settings.resolution)"),
+            std::string::npos)
+      << batch.out;
+  EXPECT_NE(batch.out.find("display_width              = 94.5         (settings.resolution)"),
+            std::string::npos)
+      << batch.out;
 }
 
 // A part's volume is its solid region's: an add-on over the model counts once, a removal reaching out

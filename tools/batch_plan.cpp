@@ -172,6 +172,22 @@ PrintSettings batchJobSettings(const BatchJob& job) {
   return print;
 }
 
+MaskOptions batchMaskOptions(const BatchJob& job, const std::filesystem::path& masks, PrintSettings& print) {
+  MaskOptions o;
+  o.output = masks;
+  o.printer = job.printer;
+  o.pixel = job.pixel;
+  if (job.resolution)
+    o.resolution = std::pair<uint32_t, uint32_t>{(*job.resolution)[0], (*job.resolution)[1]};
+  if (job.origin) o.origin = std::pair<double, double>{(*job.origin)[0], (*job.origin)[1]};
+  o.mirrorX = job.mirrorX.value_or(false);
+  o.mirrorY = job.mirrorY.value_or(false);
+  o.antialias = job.antialias;
+  o.fitAdvice = "set settings.origin to move the image, or use a smaller model or larger pixels";
+  recordDisplayOptions(print, o, "settings.resolution", "settings.pixel");
+  return o;
+}
+
 SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,
                                   const TemplateTable& table) {
   SliceJobOptions o;
@@ -192,17 +208,9 @@ SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& varia
   o.cliBinary = job.cliBinary;
   o.templateTable = &table;
   if (!variant.contours.empty()) o.outputs.push_back(variant.contours);
-  o.masks.output = variant.masks;
-  o.masks.printer = job.printer;
-  o.masks.pixel = job.pixel;
-  if (job.resolution)
-    o.masks.resolution = std::pair<uint32_t, uint32_t>{(*job.resolution)[0], (*job.resolution)[1]};
-  if (job.origin) o.masks.origin = std::pair<double, double>{(*job.origin)[0], (*job.origin)[1]};
-  o.masks.mirrorX = job.mirrorX.value_or(false);
-  o.masks.mirrorY = job.mirrorY.value_or(false);
-  o.masks.antialias = job.antialias;
-  o.masks.fitAdvice = "set settings.origin to move the image, or use a smaller model or larger pixels";
-  o.print = settingsForMaskFormat(batchJobSettings(job), variant.masks);
+  PrintSettings print = batchJobSettings(job);
+  o.masks = batchMaskOptions(job, variant.masks, print);
+  o.print = settingsForMaskFormat(print, variant.masks);
   o.add = variant.add;
   o.remove = variant.remove;
   o.report = variant.report;

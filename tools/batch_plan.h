@@ -43,6 +43,11 @@ bool batchVariantComplete(const BatchJob& job, const BatchVariant& variant);
 // print_settings. Throws InputError for an unknown name, a bad file, key or value.
 PrintSettings batchJobSettings(const BatchJob& job);
 
+// The job's mask options for the mask output `masks` (image size, pixel, origin, mirroring,
+// anti-aliasing), and its settings.resolution and settings.pixel recorded into `print` as the display's
+// settings (recordDisplayOptions), so that --explain says what the images have.
+MaskOptions batchMaskOptions(const BatchJob& job, const std::filesystem::path& masks, PrintSettings& print);
+
 // The runSliceJob options for one variant: the job's planes (default layer height 0.05 mm when none is
 // given), method, join tolerance, overwrite, mask settings, features and report, with `table` as the
 // template. Throws InputError for an unknown method.

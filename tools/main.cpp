@@ -339,7 +339,8 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
   const std::string masks = withMasks == 0 ? std::string()
                                            : "each variant's (" + std::to_string(withMasks) + " of " +
                                                  std::to_string(job.variants.size()) + " variants)";
-  const PrintSettings print = batchJobSettings(job);
+  PrintSettings print = batchJobSettings(job);
+  batchMaskOptions(job, {}, print);  // settings.resolution and settings.pixel, as the display's settings
   for (const BatchVariant& v : job.variants)
     checkMaskSettings(print, job.antialias, !v.masks.empty(), "antialias");
   explainPrintSettings(print, masks, job.antialias,

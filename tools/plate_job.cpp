@@ -317,8 +317,15 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
     o.antialias = job.antialias;
     const std::filesystem::path out = plateOutputPath(job.masks, plate);
     o.output = out;  // the format decides whether a portrait printer's orientation applies
+    o.fitAdvice = "every part must lie on the plate's display: check the placements and the corrections";
     std::string name = out.stem().string();
-    maskJob = makeMaskJob(o, print, extent, name, planes);
+    try {
+      maskJob = makeMaskJob(o, print, extent, name, planes);
+    } catch (const InputError& e) {  // said of the plate, not of "the model"
+      std::string what = e.what();
+      if (what.starts_with("the model (")) what.replace(0, 9, "its parts");
+      throw InputError(job.sourceFile.string() + ": plate " + std::to_string(plate + 1) + ": " + what);
+    }
     maskJob.layerHeight = job.layerHeight;
     struct stat info {};
     if (::stat(job.sourceFile.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
@@ -508,26 +515,44 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
 }
 
 // Given placements: overlaps (with the spacing), parts outside the printable area, parts taller than
-// the printer. Every problem is listed, each naming its part(s).
+// the printer. Every problem is listed, each naming its part(s). `grow`: how far a positive
+// absolute_correction widens every part's solid region (each part's on its own), so that parts keep the
+// spacing and the plate's edges as they print.
 void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
-                     const std::vector<PlatePartResult>& results, const PlateGeometry& g, double spacing) {
+                     const std::vector<PlatePartResult>& results, const PlateGeometry& g, double spacing,
+                     double grow) {
   std::vector<std::string> problems;
   std::vector<std::size_t> fixed;
   std::vector<CellShape> grown;  // each grown by half the spacing
+  // The layers of a plate start at the job's z0, else at the lowest bottom of its parts: a part is as tall
+  // as the stack from there to its top.
+  std::map<uint32_t, double> plateBottom;
+  for (const PlatePartResult& r : results) {
+    const auto [at, added] = plateBottom.emplace(r.plate, job.z0.value_or(r.bounds.min.z));
+    if (!added && !job.z0) at->second = std::min<double>(at->second, r.bounds.min.z);
+  }
+  const std::string grownBy =
+      grow > 0 ? " with its absolute_correction of " + mm(grow) + " (each part grows by it)" : "";
   for (std::size_t p = 0; p < results.size(); ++p) {
     const PlatePartResult& r = results[p];
-    const double height = r.bounds.max.z - std::min<double>(job.z0.value_or(r.bounds.min.z), r.bounds.min.z);
+    const double bottom = std::min<double>(plateBottom.at(r.plate), r.bounds.min.z);
+    const double height = r.bounds.max.z - bottom;
     if (g.buildHeight > 0 && height > g.buildHeight)
-      problems.push_back("part '" + r.name + "' is " + mm(height) + " tall, " + mm(height - g.buildHeight) +
-                         " taller than the printer's build height of " + mm(g.buildHeight));
+      problems.push_back(
+          "part '" + r.name + "' " +
+          (bottom < r.bounds.min.z
+               ? "reaches " + mm(height) + " above the bottom of its plate's layers (z " + mm(bottom) +
+                     "), " + mm(height - g.buildHeight) + " beyond"
+               : "is " + mm(height) + " tall, " + mm(height - g.buildHeight) + " taller than") +
+          " the printer's build height of " + mm(g.buildHeight));
     if (r.arranged) continue;
     const double out =
-        std::max({0.0, -double{r.bounds.min.x}, -double{r.bounds.min.y}, double{r.bounds.max.x} - g.widthMm(),
-                  double{r.bounds.max.y} - g.heightMm()});
+        std::max({0.0, grow - double{r.bounds.min.x}, grow - double{r.bounds.min.y},
+                  double{r.bounds.max.x} + grow - g.widthMm(), double{r.bounds.max.y} + grow - g.heightMm()});
     if (out > 0)
       problems.push_back("part '" + r.name + "' (x " + mm(r.bounds.min.x) + " .. " + mm(r.bounds.max.x) +
-                         ", y " + mm(r.bounds.min.y) + " .. " + mm(r.bounds.max.y) +
-                         ") sticks out of the printable area (" + mm(g.widthMm()) + " x " + mm(g.heightMm()) +
+                         ", y " + mm(r.bounds.min.y) + " .. " + mm(r.bounds.max.y) + ")" + grownBy +
+                         " sticks out of the printable area (" + mm(g.widthMm()) + " x " + mm(g.heightMm()) +
                          ") by " + mm(out));
     fixed.push_back(p);
     grown.push_back(placeFootprint(loaded[p].footprint, r.placement.rotation, r.tx, r.ty, 0.5 * spacing));
@@ -546,13 +571,17 @@ void checkPlacements(const PlateJob& job, const std::vector<LoadedPart>& loaded,
       // Parts that overlap (distance 0) are refused whatever the spacing, 0 too; a gap up to a micrometre
       // short of the spacing is taken as the spacing (placements given in rounded decimals).
       constexpr double kToleranceMm = 0.001;
+      const double needed = job.spacing + 2 * grow;  // each part grows by its correction
       const double distance = projectionDistance(projected(fixed[a]), ra.tx, ra.ty, projected(fixed[b]),
-                                                 rb.tx, rb.ty, std::max(job.spacing, kToleranceMm));
-      if (distance > 0 && distance >= job.spacing - kToleranceMm) continue;
-      problems.push_back(
-          "parts '" + ra.name + "' and '" + rb.name + "' " +
-          (distance > 0 ? "are " + mm(distance) + " apart, closer than the spacing of " + mm(job.spacing)
-                        : std::string("overlap or touch")));
+                                                 rb.tx, rb.ty, std::max(needed, kToleranceMm));
+      if (distance > 0 && distance >= needed - kToleranceMm) continue;
+      problems.push_back("parts '" + ra.name + "' and '" + rb.name + "' " +
+                         (distance > 0 ? "are " + mm(distance) + " apart, closer than the spacing of " +
+                                             mm(job.spacing) +
+                                             (grow > 0 ? " plus twice the absolute_correction of " +
+                                                             mm(grow) + " (each part grows by it)"
+                                                       : "")
+                                       : std::string("overlap or touch")));
     }
   if (!problems.empty()) throwProblems(job, "the plate cannot be printed as given", problems);
 }
@@ -587,7 +616,10 @@ struct PreparedPlateJob::Impl {
   std::vector<std::filesystem::path> inputs;   // the job file, profile, light map, parts' files
 };
 
-PrintSettings plateJobSettings(const PlateJob& job) {
+// The job's printer, material and corrections, before its settings.resolution, settings.pixel and
+// settings.build_height are recorded (the plate's geometry is taken from these, with the printer's own
+// pitch).
+PrintSettings givenPlateSettings(const PlateJob& job) {
   PrintSettings print = resolvePrintSettings(
       {job.profile, job.printer, job.material, job.printSettings, "plate job print_settings",
        job.sourceFile.string() + ": printer", job.sourceFile.string() + ": material"});
@@ -600,12 +632,31 @@ PrintSettings plateJobSettings(const PlateJob& job) {
   return settingsForMaskFormat(print, job.masks);
 }
 
+// settings.resolution, settings.pixel and settings.build_height as the printer's display_pixels_x/y,
+// display_width/height and max_print_height, naming them: --explain and the report say what the plate is.
+void recordPlateSettings(PrintSettings& print, const PlateJob& job) {
+  MaskOptions o;
+  o.pixel = job.pixel;
+  if (job.resolution)
+    o.resolution = std::pair<uint32_t, uint32_t>{(*job.resolution)[0], (*job.resolution)[1]};
+  recordDisplayOptions(print, o, "settings.resolution", "settings.pixel");
+  if (job.buildHeight)
+    assignSetting(print, "max_print_height", formatNumber(*job.buildHeight), "settings.build_height");
+}
+
+PrintSettings plateJobSettings(const PlateJob& job) {
+  PrintSettings print = givenPlateSettings(job);
+  recordPlateSettings(print, job);
+  return print;
+}
+
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {
   impl_->job = std::move(given);
   const PlateJob& job = impl_->job;
-  impl_->print = plateJobSettings(job);
+  impl_->print = givenPlateSettings(job);
+  impl_->geometry = plateGeometry(job, impl_->print);
+  recordPlateSettings(impl_->print, job);
   const PrintSettings& print = impl_->print;
-  impl_->geometry = plateGeometry(job, print);
   const PlateGeometry& geometry = impl_->geometry;
   // A spacing wider than the plate keeps every part from every other on any plate; the arrangement's
   // grids grow with it (10^5 mm ran out of memory): a mistake, said as one.
@@ -730,8 +781,13 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
   ArrangeSettings arrange;
   arrange.plateWidth = geometry.widthMm();
   arrange.plateHeight = geometry.heightMm();
-  arrange.margin = job.margin;
-  arrange.spacing = job.spacing + residualSpacing(job, loaded, print);
+  // A positive absolute_correction widens every part by that much as it prints, a scaling correction
+  // with different x and y factors scales it once turned (residualSpacing: for two neighbours, each
+  // point moving up to sqrt(2) times as far as along one axis): the parts are nested with room for both,
+  // from each other and from the plate's edges (there, along one axis only).
+  const double grow = std::max(0.0, print.absoluteCorrection), residual = residualSpacing(job, loaded, print);
+  arrange.margin = job.margin + grow + residual / (2 * std::sqrt(2.0));
+  arrange.spacing = job.spacing + residual + 2 * grow;
   arrange.rotationStep = job.rotationStep;
   arrange.cancel = &interruptRequested();
   Arrangement arranged;
@@ -772,7 +828,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         0.5 * (double{box.min.x} + box.max.x), 0.5 * (double{box.min.y} + box.max.y), a.rotation});
     r.footprintMm2 = loaded[p].footprint.area();
   }
-  checkPlacements(job, loaded, result.parts, geometry, arrange.spacing);
+  checkPlacements(job, loaded, result.parts, geometry, arrange.spacing, grow);
 }
 
 PreparedPlateJob::~PreparedPlateJob() = default;

@@ -175,7 +175,8 @@ void checkDisplayOverrides(const PrintSettings& print, const std::string& userOr
     contradiction(names.mirrorY, "display_mirror_y", print.mirrorY);
 }
 
-void recordDisplayOptions(PrintSettings& print, MaskOptions& o) {
+void recordDisplayOptions(PrintSettings& print, MaskOptions& o, const char* resolutionName,
+                          const char* pixelName) {
   if (!o.resolution && !o.pixel) return;
   const bool pixelGiven = o.pixel.has_value();
   // The printer's pitch, kept exactly as the masks use it (display_width / display_pixels_x).
@@ -185,15 +186,15 @@ void recordDisplayOptions(PrintSettings& print, MaskOptions& o) {
   const auto [width, height] =
       o.resolution.value_or(std::pair<uint32_t, uint32_t>{print.pixelsX, print.pixelsY});
   if (o.resolution) {
-    assignSetting(print, "display_pixels_x", std::to_string(width), "--resolution");
-    assignSetting(print, "display_pixels_y", std::to_string(height), "--resolution");
+    assignSetting(print, "display_pixels_x", std::to_string(width), resolutionName);
+    assignSetting(print, "display_pixels_y", std::to_string(height), resolutionName);
   }
   const auto nanometres = [](double mm) { return std::round(mm * 1e6) / 1e6; };
   // (A display wider than the setting's range, 100 m, keeps the printer's numbers: the masks are
   // refused as too large to fit in any case.)
   if (o.pixel && *o.pixel > 0 && width > 0 && height > 0 &&
       nanometres(std::max(width, height) * *o.pixel) <= 1e5) {
-    const std::string origin = pixelGiven ? "--pixel" : "--resolution";
+    const std::string origin = pixelGiven ? pixelName : resolutionName;
     assignSetting(print, "display_width", formatNumber(nanometres(width * *o.pixel)), origin);
     assignSetting(print, "display_height", formatNumber(nanometres(height * *o.pixel)), origin);
   }
@@ -243,7 +244,9 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   job.vdbSlabs = o.vdbSlabs;
   uint32_t width = print.pixelsX, height = print.pixelsY;
   double pixel = print.pixelsX > 0 && print.displayWidth > 0 ? print.displayWidth / print.pixelsX : 0.0;
-  if (print.pixelsY > 0 && print.displayHeight > 0 && pixel > 0 &&
+  // A display of the printer's own must have square pixels; a pixel the job gives replaces it (its
+  // display_width and _height, recorded in nanometres, may then differ in the last digit).
+  if (!o.pixel && print.pixelsY > 0 && print.displayHeight > 0 && pixel > 0 &&
       std::abs(print.displayHeight / print.pixelsY - pixel) > 1e-9 * pixel)
     throw InputError("printer '" + print.printerName + "': display_width / display_pixels_x (" +
                      formatNumber(pixel) + " mm) and display_height / display_pixels_y (" +

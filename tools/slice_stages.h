@@ -48,10 +48,13 @@ double nominalLayerHeight(const PlaneSpec& spec, const std::vector<double>& plan
 
 // The mask job for `extent` (grid, printer model, layer count). Throws InputError for a missing image
 // size or pixel, or an extent that does not fit (unless o.crop).
-// --resolution and --pixel as the printer's display settings (display_pixels_x/y, display_width/height,
-// naming the option), so that --explain and the summary give the display the masks have; --resolution
-// alone keeps the printer's pitch, which `o` then carries as its pixel (the same bits the masks use).
-void recordDisplayOptions(PrintSettings& print, MaskOptions& o);
+// --resolution and --pixel (a job's settings.resolution and settings.pixel: `resolutionName`,
+// `pixelName`) as the printer's display settings (display_pixels_x/y, display_width/height, naming the
+// option), so that --explain, the summary and a plate's report give the display the masks have;
+// --resolution alone keeps the printer's pitch, which `o` then carries as its pixel (the same bits the
+// masks use).
+void recordDisplayOptions(PrintSettings& print, MaskOptions& o, const char* resolutionName = "--resolution",
+                          const char* pixelName = "--pixel");
 
 // The job's own display options and the display settings the user set (those whose origin is
 // `userOrigin`: "command line", "batch job print_settings", ...) must not both say one thing: the option
