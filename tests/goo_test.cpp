@@ -477,6 +477,18 @@ TEST_F(GooCli, HeaderCarriesTheProfileSettings) {
   EXPECT_EQ(layers.back().exposure, 3.5f);
   EXPECT_EQ(layers.back().liftDistance, 7.0f);
   EXPECT_EQ(layers.back().liftSpeed, 80.0f);
+  EXPECT_EQ(h.transitionLayers, 8u);  // the sl1 preset's 10 faded layers - 2
+
+  // A stack shorter than the fade: as many transition layers as there are after the bottom one (a
+  // one-layer file said 8).
+  for (const auto& [count, transitions] : {std::pair<const char*, uint64_t>{"1", 0}, {"4", 3}}) {
+    ASSERT_EQ(run({"slice", tool_test::examplePart().string(), "--layers", count, "--printer", "sl1", "-q",
+                   "--masks", "short.goo", "--force"})
+                  .code(),
+              0);
+    ASSERT_EQ(decodeGoo(readFile(path("short.goo")), h, layers), "");
+    EXPECT_EQ(h.transitionLayers, transitions) << count << " layers";
+  }
 
   // A printer name longer than the header's 31 bytes was cut off silently: refused, naming the file.
   const tool_test::RunResult longName =

@@ -134,7 +134,18 @@ TEST_F(NanoDlpCli, LayersEqualThePngLayersOfTheSameJob) {
   EXPECT_TRUE(preview.starts_with("\x89PNG\r\n\x1a\n"));
   EXPECT_EQ(be32(preview, 16), 200u);  // IHDR width, height
   EXPECT_EQ(be32(preview, 20), 100u);
+  const auto profile = nlohmann::json::parse(entries.at("profile.json"));
+  EXPECT_EQ(profile["TransitionalLayer"], 8);  // the sl1 preset's 10 faded layers - 2
+  EXPECT_EQ(profile["BottomLiftDistance"], 5.0);
+  EXPECT_EQ(profile["BottomLiftSpeed"], 65.0);
   expectNoTemporaries();
+  // A stack shorter than the fade: as many transition layers as there are after the bottom one.
+  auto one = args;
+  one.insert(one.end(), {"--layers", "1", "--masks", "one.nanodlp"});
+  one.erase(one.begin() + 2, one.begin() + 4);  // -H 0.1
+  ASSERT_EQ(run(one).code(), 0);
+  EXPECT_EQ(nlohmann::json::parse(zipEntries(path("one.nanodlp")).at("profile.json"))["TransitionalLayer"],
+            0);
 }
 
 }  // namespace

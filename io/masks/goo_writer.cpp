@@ -133,14 +133,15 @@ std::vector<uint8_t> gooHeader(const MaskJob& job, uint32_t layers, const std::v
   h.u8(0);                                                  // 53 normal mode
   double seconds = 0;
   for (uint32_t i = 0; i < layers; ++i) seconds += layerSeconds(job, i);
-  h.u32(static_cast<uint32_t>(std::lround(seconds)));   // 54
-  h.f32(job.volumeMl * 1000);                           // 55 mm^3
-  h.f32(job.volumeMl * job.resinDensity);               // 56 g
-  h.f32(0);                                             // 57 price
-  h.text("$", 8);                                       // 58
-  h.u32(static_cast<uint32_t>(kGooHeaderSize));         // 59
-  h.u8(1);                                              // 60 grey values 0..255
-  h.u16(static_cast<uint16_t>(fadeLayersOf(job) - 2));  // 61 transition layers
+  h.u32(static_cast<uint32_t>(std::lround(seconds)));  // 54
+  h.f32(job.volumeMl * 1000);                          // 55 mm^3
+  h.f32(job.volumeMl * job.resinDensity);              // 56 g
+  h.f32(0);                                            // 57 price
+  h.text("$", 8);                                      // 58
+  h.u32(static_cast<uint32_t>(kGooHeaderSize));        // 59
+  h.u8(1);                                             // 60 grey values 0..255
+  // 61 transition layers: the fade's, as many as the file has after its bottom layer at most
+  h.u16(static_cast<uint16_t>(std::min(fadeLayersOf(job) - 2, layers > 0 ? layers - 1 : 0)));
   return bytes;
 }
 

@@ -120,10 +120,13 @@ class NanoDlpSink final : public EncodingMaskSink {
     profile["CureTime"] = job.exposureTime;
     profile["SupportCureTime"] = job.initialExposureTime;
     profile["SupportLayerNumber"] = 1;
-    profile["TransitionalLayer"] = fadeLayersOf(job) - 2;
+    // As many transition layers as the file has after its bottom layer at most.
+    profile["TransitionalLayer"] = std::min(fadeLayersOf(job) - 2, next_ > 0 ? next_ - 1 : 0);
     profile["WaitBeforePrint"] = job.waitBeforeExposure;
     profile["LiftDistance"] = job.liftDistance;
     profile["LiftSpeed"] = job.liftSpeed;
+    profile["BottomLiftDistance"] = job.bottomLiftDistance;
+    profile["BottomLiftSpeed"] = job.bottomLiftSpeed;
     profile["RetractSpeed"] = job.retractSpeed;
     profile["XPixels"] = job.grid.width;
     profile["YPixels"] = job.grid.height;
