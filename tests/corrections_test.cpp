@@ -919,6 +919,65 @@ class CorrectionsCli : public CliToolBase {
   }
 };
 
+// The contours' extent (a CLI's $$DIMENSION, an SVG's view box) holds every contour written: a growing
+// absolute correction and an add-on reaching out of the model widen it (the header said -2.65 .. 12.65
+// where the polylines ran -2.75 .. 12.75, and an SVG's view box cut the add-on off).
+TEST_F(CorrectionsCli, TheContoursExtentHoldsTheCorrectedContours) {
+  writeBinaryStl(path("box.stl"), fixtures::box(0, 0, 0, 10, 10, 2), "box", false);
+  writeBinaryStl(path("tab.stl"), fixtures::box(9, 4, 0, 14, 6, 2), "tab", false);
+  const auto run1 = run({"slice", "box.stl", "-H", "0.5", "-o", "c.cli", "-o", "c.svg", "--add", "tab.stl",
+                         "--absolute-correction", "0.1", "--relative-correction-x", "1.02", "-q"});
+  ASSERT_EQ(run1.code(), 0) << run1.describe();
+  double dims[6] = {};
+  double lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+  std::istringstream in(tool_test::readBytes(path("c.cli")));
+  for (std::string line; std::getline(in, line);) {
+    if (line.starts_with("$$DIMENSION/")) {
+      ASSERT_EQ(std::sscanf(line.c_str() + 12, "%lf,%lf,%lf,%lf,%lf,%lf", &dims[0], &dims[1], &dims[2],
+                            &dims[3], &dims[4], &dims[5]),
+                6);
+    }
+    if (!line.starts_with("$$POLYLINE/")) continue;
+    std::vector<double> v;
+    std::stringstream fields(line.substr(11));
+    for (std::string f; std::getline(fields, f, ',');) v.push_back(std::stod(f));
+    for (std::size_t k = 3; k + 1 < v.size(); k += 2)
+      for (int a = 0; a < 2; ++a) lo[a] = std::min(lo[a], v[k + a]), hi[a] = std::max(hi[a], v[k + a]);
+  }
+  ASSERT_TRUE(std::isfinite(lo[0])) << "no polyline";
+  EXPECT_NEAR(hi[0], 14.28, 1e-3);  // the tab's end, scaled about the model's centre (x 5), grown by 0.1
+  for (int a = 0; a < 2; ++a) {
+    EXPECT_LE(dims[a], lo[a] + 1e-6) << "axis " << a;
+    EXPECT_GE(dims[3 + a], hi[a] - 1e-6) << "axis " << a;
+  }
+  // The SVG's first panel: its frame is the extent; every point of its paths lies inside it.
+  const std::string svg = tool_test::readBytes(path("c.svg"));
+  const std::size_t frame = svg.find("<rect class=\"frame\"");
+  ASSERT_NE(frame, std::string::npos);
+  double fx = 0, fy = 0, fw = 0, fh = 0;
+  ASSERT_EQ(std::sscanf(svg.c_str() + frame,
+                        "<rect class=\"frame\" x=\"%lf\" y=\"%lf\" width=\"%lf\" height=\"%lf\"", &fx, &fy,
+                        &fw, &fh),
+            4)
+      << svg.substr(frame, 100);
+  const std::size_t end = svg.find("</g>", frame);
+  std::size_t points = 0;
+  for (std::size_t d = svg.find(" d=\"", frame); d < end; d = svg.find(" d=\"", d + 1)) {
+    const std::size_t close = svg.find('"', d + 4);
+    std::string text = svg.substr(d + 4, close - d - 4);
+    for (char& c : text)
+      if (c == 'M' || c == 'L' || c == 'Z' || c == ',') c = ' ';
+    std::istringstream numbers(text);
+    for (double x = 0, y = 0; numbers >> x >> y; ++points) {
+      EXPECT_GE(x, fx - 2e-4);
+      EXPECT_LE(x, fx + fw + 2e-4);
+      EXPECT_GE(y, fy - 2e-4);
+      EXPECT_LE(y, fy + fh + 2e-4);
+    }
+  }
+  EXPECT_GT(points, 4u);
+}
+
 TEST_F(CorrectionsCli, CylinderEachCorrectionAloneAndCombined) {
   const double r = 4, h = 2, layer = 0.1, pixel = 0.01;
   writeBinaryStl(path("cyl.stl"), fixtures::cylinder(0, 0, r, 720, 0, static_cast<float>(h)), "cylinder",

@@ -907,7 +907,19 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     job.name = model.stem().string();
     for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
       if (job.name.size() > 4 && job.name.ends_with(ext)) job.name.resize(job.name.size() - 4);
-    job.bounds = result.bounds;
+    // The contours' extent in x and y (a CLI's $$DIMENSION, an SVG's view box): the model's and its
+    // add-ons', grown by a growing absolute_correction, so that it holds every corrected contour.
+    BoundingBox extent = result.bounds;
+    for (std::size_t i = 0; i < options.add.size(); ++i) {
+      const BoundingBox b = boundsOf(features[i].corners);
+      extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
+      extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
+    }
+    job.bounds = extent;
+    if (const float grow = static_cast<float>(std::max(0.0, print.absoluteCorrection)); grow > 0) {
+      job.bounds.min = {extent.min.x - grow, extent.min.y - grow, extent.min.z};
+      job.bounds.max = {extent.max.x + grow, extent.max.y + grow, extent.max.z};
+    }
     job.layerCount = static_cast<uint32_t>(planes.size());
     const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
       std::string name = path.stem().string();
@@ -922,12 +934,6 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
 
     // Masks: grid and sink (per-slot rasterizer state below).
     if (masks) {
-      BoundingBox extent = result.bounds;
-      for (std::size_t i = 0; i < options.add.size(); ++i) {
-        const BoundingBox b = boundsOf(features[i].corners);
-        extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
-        extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
-      }
       maskJob = makeMaskJob(options.masks, print, extent, job.name, planes);
       maskJob.layerHeight = nominalLayerHeight(options.planes, planes, result.bounds.min.z);
       // Archive timestamps come from the model file, so the same input gives the same bytes.
