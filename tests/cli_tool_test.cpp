@@ -1313,7 +1313,8 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
   }
 
   // Without features the model's output is what it always was: the same bytes as the feature file
-  // without the features' labels and polylines.
+  // without the features' labels and polylines, and with the model's extent (the feature file's holds
+  // the add-on, which reaches 2 mm beyond the model in y).
   const RunResult alone =
       run({"slice", path("model.stl").string(), "-H", "0.5", "-o", path("m.cli").string(), "-q"});
   ASSERT_EQ(alone.code(), 0) << alone.describe();
@@ -1322,6 +1323,11 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
     if (line.starts_with("$$LABEL/2,") || line.starts_with("$$LABEL/3,") ||
         line.starts_with("$$POLYLINE/2,") || line.starts_with("$$POLYLINE/3,"))
       continue;
+    if (line.starts_with("$$DIMENSION/")) {
+      EXPECT_EQ(line, "$$DIMENSION/0.000000,0.000000,0.000000,20.000000,12.000000,5.000000");
+      filtered += "$$DIMENSION/0.000000,0.000000,0.000000,20.000000,10.000000,5.000000\n";
+      continue;
+    }
     filtered += line + "\n";
   }
   EXPECT_EQ(readBytes(path("m.cli")), filtered);
