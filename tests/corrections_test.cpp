@@ -1056,6 +1056,22 @@ TEST_F(CorrectionsCli, ProfileFileSettingsReachTheSl1) {
             std::string::npos)
       << ini.out;
   EXPECT_FALSE(fs::exists(path("b.sl1")));  // --explain writes nothing
+  // What the run would refuse without reading a mesh, --explain refuses too (it said the settings and
+  // exit 0): a model that cannot be opened, a light map missing or of another size than the display.
+  for (const auto& [args, said] : std::vector<std::pair<std::vector<std::string>, std::string>>{
+           {{"missing.stl"}, "missing.stl: cannot open: No such file or directory"},
+           {{examplePart().string(), "--add", "missing-tab.stl"}, "missing-tab.stl: cannot open"},
+           {{examplePart().string(), "--antialias", "--light-map", "missing.png"},
+            "missing.png: cannot read"},
+           {{examplePart().string(), "--antialias", "--light-map", path("lab.json").string()},
+            "lab.json: the light map must be an 8-bit (or less) grayscale PNG"}}) {
+    std::vector<std::string> command{"slice"};
+    command.insert(command.end(), args.begin(), args.end());
+    command.insert(command.end(), {"--printer", "sl1", "--masks", path("x.sl1").string(), "--explain"});
+    const RunResult refused = this->run(command);
+    EXPECT_EQ(refused.code(), 1) << refused.describe();
+    EXPECT_NE(refused.err.find(said), std::string::npos) << refused.err;
+  }
   // The display the masks have: --resolution (with the printer's pitch) and --mirror-y.
   const RunResult display =
       this->run({"slice", examplePart().string(), "--printer", "sl1", "--resolution", "2000x1000",

@@ -1,5 +1,6 @@
 // toposlice: the command-line program. Subcommands: info, slice, template, batch, preview, plate.
 // Every failure prints one line "toposlice: error: <reason>" to stderr and exits non-zero.
+#include <fcntl.h>
 #include <unistd.h>
 #include <CLI/CLI.hpp>
 
@@ -314,15 +315,27 @@ bool parsePixelSize(const std::string& text, uint64_t max, uint32_t& width, uint
   return number(all.substr(0, x), width) && number(all.substr(x + 1), height);
 }
 
-// slice --explain: nothing is read or written.
+// slice --explain: nothing is written, and no mesh is read; what the run would refuse without one is
+// refused here too: bad numbers, an input that cannot be opened, the image's settings and a light map
+// that does not fit the display.
 int explainSettings(const std::string& model, const SliceJobOptions& options) {
-  validateSliceOptions(options);  // what the run would refuse, --explain refuses too
+  validateSliceOptions(options);
+  std::vector<std::filesystem::path> inputs{model};
+  inputs.insert(inputs.end(), options.add.begin(), options.add.end());
+  inputs.insert(inputs.end(), options.remove.begin(), options.remove.end());
+  for (const std::filesystem::path& file : inputs) {
+    const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw InputError(file.string() + ": cannot open: " + std::generic_category().message(errno));
+    ::close(fd);
+    if (std::filesystem::is_directory(file)) throw InputError(file.string() + ": is a directory");
+  }
   if (!options.masks.output.empty()) {
     // The image's own checks (a size and a pixel pitch, square pixels, an orientation the format can
     // carry), as the run makes them, without the model: its extent only places the image (cropped here).
     MaskOptions masks = options.masks;
     masks.crop = true;
-    makeMaskJob(masks, options.print, BoundingBox{}, model, {});
+    const MaskJob job = makeMaskJob(masks, options.print, BoundingBox{}, model, {});
+    maskTransfer(options.print, job);  // reads the light map: its size against the display
   }
   std::printf("model      : %s\n", model.c_str());
   explainPrintSettings(options.print, options.masks.output, options.masks.antialias,
