@@ -1305,6 +1305,26 @@ TEST_F(Summary, JsonSummaryHasTheCountsVolumeAndOutputs) {
     EXPECT_TRUE(t["defects"][k].is_null()) << k << " " << t["defects"];
 }
 
+// The gamma the masks have is in the summary's settings when it was left to --antialias, as every
+// printer file records it (the summary left it out): 1 with --antialias, 0 for binary masks; a gamma
+// the user gives is given as it is; contours alone have none.
+TEST_F(Summary, TheMasksGammaIsInTheSettings) {
+  const auto gamma = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args{"slice",  examplePart().string(), "-H", "1", "--summary", "s.json", "-q",
+                                  "--force"};
+    args.insert(args.end(), extra.begin(), extra.end());
+    const RunResult r = run(args);
+    EXPECT_EQ(r.code(), 0) << r.describe();
+    const auto settings = nlohmann::json::parse(readBytes(path("s.json")))["print_settings"];
+    return settings["values"].value("gamma_correction", std::string("none")) + " " +
+           settings["set_by"].value("gamma_correction", std::string("none"));
+  };
+  EXPECT_EQ(gamma({"--printer", "sl1", "--masks", "a.sl1", "--antialias"}), "1 --antialias");
+  EXPECT_EQ(gamma({"--printer", "sl1", "--masks", "b.sl1"}), "0 default");
+  EXPECT_EQ(gamma({"--printer", "sl1", "--masks", "c.sl1", "--gamma-correction", "0.5"}), "0.5 command line");
+  EXPECT_EQ(gamma({"-o", "d.cli"}), "none none");
+}
+
 TEST_F(Summary, Sl1NumbersReadBackAsGiven) {
   ASSERT_EQ(run({"slice", examplePart().string(), "-H", "0.01", "--masks", "m.sl1", "--printer", "sl1", "-q"})
                 .code(),

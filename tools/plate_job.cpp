@@ -867,9 +867,11 @@ void PreparedPlateJob::writeReport() const {
     j["job"] = job.sourceFile.string();
     j["printer"] = impl_->print.printerName;
     j["material"] = impl_->print.materialName;
-    j["print_settings"] = printSettingsJson(impl_->print,
-                                            "each part's own: the centre of its bounding box in x and y, "
-                                            "lowest z; x and y along the plate's axes");
+    j["print_settings"] =
+        printSettingsJson(impl_->print,
+                          "each part's own: the centre of its bounding box in x and y, "
+                          "lowest z; x and y along the plate's axes",
+                          job.masks.empty() ? nullptr : "settings.antialias", job.antialias);
     j["image"] = {{"width", geometry.width}, {"height", geometry.height}, {"pixel_mm", geometry.pixel}};
     j["layer_height_mm"] = job.layerHeight;
     j["template_reuse"] = {{"parts_checked_against_template", result.templateChecked},

@@ -403,12 +403,17 @@ LayerCorrection layerCorrection(const PrintSettings& print, uint32_t k, std::siz
           print.elefantFootMinWidth};
 }
 
-nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre) {
+nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre,
+                                         const char* antialiasBy, bool antialias) {
   nlohmann::ordered_json settings = nlohmann::ordered_json::object();
   for (const auto& [key, value] : settingValues(print))
     if (!value.empty()) settings[key] = value;
   nlohmann::ordered_json origins = nlohmann::ordered_json::object();
   for (const auto& [key, origin] : print.origin) origins[key] = origin;
+  if (antialiasBy != nullptr && !print.gammaCorrection) {
+    settings["gamma_correction"] = antialias ? "1" : "0";
+    origins["gamma_correction"] = antialias ? antialiasBy : "default";
+  }
   const auto scale = print.scale();
   return {{"printer", print.printerName},
           {"material", print.materialName},
@@ -732,7 +737,9 @@ static void writeSliceSummary(OutputFile& file, const std::filesystem::path& mod
   for (const auto& f : options.add) features.push_back({{"role", "add"}, {"file", f.string()}});
   for (const auto& f : options.remove) features.push_back({{"role", "remove"}, {"file", f.string()}});
   j["features"] = features;
-  j["print_settings"] = printSettingsJson(options.print, "bounding-box centre in x and y, lowest z");
+  j["print_settings"] =
+      printSettingsJson(options.print, "bounding-box centre in x and y, lowest z",
+                        options.masks.output.empty() ? nullptr : "--antialias", options.masks.antialias);
   j["volume_ml"] = r.volumeMl;
   j["resin_mass_g"] = r.volumeMl * options.print.materialDensity;
   j["volume_source"] =

@@ -101,7 +101,11 @@ void checkMaskSettings(const PrintSettings& print, bool antialias, bool masks, c
 
 // The settings as the summary and the plate report give them: printer, material, every value that is set,
 // where each came from, the scaling factors and, in words, the centre they scale about.
-nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre);
+// `antialiasBy`: for a job with masks, how it asked for anti-aliasing (--antialias, settings.antialias;
+// nullptr: no masks): a gamma_correction left unset is then given as the masks have it (1 anti-aliased,
+// 0 binary), set by that option or "default", as the printer files record it.
+nlohmann::ordered_json printSettingsJson(const PrintSettings& print, const char* scaleCentre,
+                                         const char* antialiasBy = nullptr, bool antialias = false);
 
 // What the settings do to every mask of `job` as it is rasterized (anti-aliased masks only): the gamma
 // curve, when gamma_correction is set and not 1, and the light-uniformity map, read from light_map (a
