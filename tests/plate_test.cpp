@@ -604,6 +604,34 @@ TEST_F(PlateTest, TheJobsDisplaySettingsAreTheReportedOnes) {
       << batch.out;
 }
 
+// A part whose mesh is not closed is said in the report (its defects, as in the slice summary) and the
+// summary, as slice says it (the plate was silent); a closed one has none.
+TEST_F(PlateTest, APartThatIsNotClosedIsSaid) {
+  FacetSoup open = fixtures::box(0, 0, 0, 10, 10, 2);
+  open.corners.resize(open.corners.size() - 3);  // one facet less: three boundary edges
+  writeBinaryStl(dir_ / "open.stl", open, "open", false);
+  writeBinaryStl(dir_ / "closed.stl", fixtures::box(0, 0, 0, 10, 10, 2), "closed", false);
+  const PlateResult r = runPlateJob(job(R"({"printer": "sl1", "settings": {"layer_height": 0.5},
+          "parts": [{"name": "o", "model": "open.stl", "placement": "auto"},
+                    {"name": "c", "model": "closed.stl", "placement": "auto"}],
+          "outputs": {"contours": ["p.cli"], "report": "r.json"}})"),
+                                    nullptr);
+  const nlohmann::json report = nlohmann::json::parse(readBytes(dir_ / "r.json"));
+  EXPECT_EQ(report["parts"][0]["defects"]["boundary_edges"], 3) << report["parts"][0].dump();
+  EXPECT_EQ(report["parts"][1]["defects"]["boundary_edges"], 0) << report["parts"][1].dump();
+  char* text = nullptr;
+  std::size_t size = 0;
+  std::FILE* out = ::open_memstream(&text, &size);
+  printPlateSummary(out, r);
+  std::fclose(out);
+  const std::string summary(text, size);
+  std::free(text);
+  EXPECT_NE(summary.find("part 'o': mesh not closed: 3 boundary, 0 non-manifold, 0 inconsistent edges"),
+            std::string::npos)
+      << summary;
+  EXPECT_EQ(summary.find("part 'c': mesh not closed"), std::string::npos) << summary;
+}
+
 // A part's volume is its solid region's: an add-on over the model counts once, a removal reaching out
 // of it takes nothing there (the signed areas gave 100 + 100 - 30 = 170 mm^2 a layer), with or without
 // masks; the plate's volume without masks is the parts'.

@@ -739,6 +739,8 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
         r.name = spec.name;
         r.topology = topo.topology;
         r.facets = part.model.facetCount();
+        r.edgesCounted = topo.edgesCounted;
+        r.edges = topo.edges;
       } catch (const std::bad_alloc&) {  // named as the model it was reading, not "std::bad_alloc"
         errors[p] = job.parts[p].model.string() + ": out of memory reading or preparing the part";
       } catch (const std::exception& failure) {
@@ -898,6 +900,12 @@ void PreparedPlateJob::writeReport() const {
            {"translation_mm", {r.tx, r.ty}},
            {"topology", r.topology},
            {"facets", r.facets},
+           // As in the slice summary: counted where the adjacency was built, null after a table.
+           {"defects",
+            {{"boundary_edges", r.edgesCounted ? nlohmann::ordered_json(r.edges.boundary) : nullptr},
+             {"non_manifold_edges", r.edgesCounted ? nlohmann::ordered_json(r.edges.nonManifold) : nullptr},
+             {"inconsistent_edges",
+              r.edgesCounted ? nlohmann::ordered_json(r.edges.inconsistent) : nullptr}}},
            {"volume_ml", r.volumeMl},
            {"first_layer", r.firstLayer},
            {"last_layer", r.lastLayer},
@@ -1027,6 +1035,15 @@ void printPlateSummary(std::FILE* out, const PlateResult& r) {
     std::fprintf(out, "%-20s %5u %9.3f %9.3f %7.2f %9.4f %7lld %7lld %7.1f mm2\n", p.name.c_str(),
                  p.plate + 1, p.placement.x, p.placement.y, p.placement.rotation, p.volumeMl,
                  static_cast<long long>(p.firstLayer), static_cast<long long>(p.lastLayer), p.footprintMm2);
+  // A part whose mesh is not closed is sliced as slice slices it (its open outlines bridged): said, as
+  // slice's summary says it.
+  for (const PlatePartResult& p : r.parts)
+    if (p.edgesCounted && (p.edges.boundary > 0 || p.edges.nonManifold > 0 || p.edges.inconsistent > 0))
+      std::fprintf(out,
+                   "part '%s': mesh not closed: %llu boundary, %llu non-manifold, %llu inconsistent edges\n",
+                   p.name.c_str(), static_cast<unsigned long long>(p.edges.boundary),
+                   static_cast<unsigned long long>(p.edges.nonManifold),
+                   static_cast<unsigned long long>(p.edges.inconsistent));
   for (const auto& w : r.written) std::fprintf(out, "wrote %s\n", w.c_str());
   std::fprintf(out, "read+topology %.2f s, arrange %.3f s, slice+write %.2f s\n", r.readSeconds,
                r.arrangeSeconds, r.sliceSeconds);

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "core/mesh/adjacency.h"
 #include "core/mesh/mesh.h"
 #include "core/progress.h"
 #include "io/jobs/plate_job_file.h"
@@ -30,6 +31,8 @@ struct PlatePartResult {
   int64_t firstLayer = -1, lastLayer = -1;  // plate layers holding its contours; -1: none
   double footprintMm2 = 0;                  // area of its footprint cells
   BoundingBox bounds;                       // on the plate, mm (after rotation and translation)
+  bool edgesCounted = false;                // the model's edges were counted (its adjacency built here)
+  EdgeStats edges;                          // then: boundary, non-manifold, inconsistent edges
 };
 
 struct PlateResult {
