@@ -67,30 +67,37 @@ double determinant(const Affine& m) {
          m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
 }
 
-// The first `limit` bytes (at most) of the zip entry `entry` of `bytes`, empty when there is none or it
-// cannot be read.
-std::string zipEntryText(std::span<const std::byte> bytes, const std::string& entry, std::size_t limit) {
+// Calls use(archive) with the zip `bytes` opened read-only; nothing when it cannot be opened.
+template <class Use>
+void withZip(std::span<const std::byte> bytes, Use&& use) {
   zip_error_t error;
   zip_error_init(&error);
   zip_source_t* source = zip_source_buffer_create(bytes.data(), bytes.size(), 0, &error);
   zip_t* archive = source != nullptr ? zip_open_from_source(source, ZIP_RDONLY, &error) : nullptr;
-  std::string text;
   if (archive == nullptr) {
     if (source != nullptr) zip_source_free(source);
   } else {
-    zip_stat_t st;
-    zip_stat_init(&st);
-    if (zip_stat(archive, entry.c_str(), 0, &st) == 0 && (st.valid & ZIP_STAT_SIZE)) {
-      if (zip_file_t* file = zip_fopen(archive, entry.c_str(), 0)) {
-        text.resize(std::min<std::size_t>(st.size, limit));
-        const zip_int64_t n = zip_fread(file, text.data(), text.size());
-        text.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
-        zip_fclose(file);
-      }
-    }
+    use(archive);
     zip_discard(archive);  // frees the source too
   }
   zip_error_fini(&error);
+}
+
+// The first `limit` bytes (at most) of the zip entry `entry` of `bytes`, empty when there is none or it
+// cannot be read.
+std::string zipEntryText(std::span<const std::byte> bytes, const std::string& entry, std::size_t limit) {
+  std::string text;
+  withZip(bytes, [&](zip_t* archive) {
+    zip_stat_t st;
+    zip_stat_init(&st);
+    if (zip_stat(archive, entry.c_str(), 0, &st) != 0 || !(st.valid & ZIP_STAT_SIZE)) return;
+    if (zip_file_t* file = zip_fopen(archive, entry.c_str(), 0)) {
+      text.resize(std::min<std::size_t>(st.size, limit));
+      const zip_int64_t n = zip_fread(file, text.data(), text.size());
+      text.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
+      zip_fclose(file);
+    }
+  });
   return text;
 }
 
@@ -99,14 +106,8 @@ std::string zipEntryText(std::span<const std::byte> bytes, const std::string& en
 // which of two parts of one name they read (libzip the first, others the last), so the package does not
 // say what its model is.
 std::string twiceNamedEntry(std::span<const std::byte> bytes) {
-  zip_error_t error;
-  zip_error_init(&error);
-  zip_source_t* source = zip_source_buffer_create(bytes.data(), bytes.size(), 0, &error);
-  zip_t* archive = source != nullptr ? zip_open_from_source(source, ZIP_RDONLY, &error) : nullptr;
   std::string twice;
-  if (archive == nullptr) {
-    if (source != nullptr) zip_source_free(source);
-  } else {
+  withZip(bytes, [&](zip_t* archive) {
     std::map<std::string, std::string> seen;  // lower case -> as named
     const zip_int64_t count = zip_get_num_entries(archive, 0);
     for (zip_int64_t i = 0; i < count && twice.empty(); ++i) {
@@ -116,26 +117,14 @@ std::string twiceNamedEntry(std::span<const std::byte> bytes) {
       for (char& c : key) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
       if (!seen.emplace(key, name).second) twice = name;
     }
-    zip_discard(archive);
-  }
-  zip_error_fini(&error);
+  });
   return twice;
 }
 
 // Whether the zip `bytes` holds the entry `entry`.
 bool zipHasEntry(std::span<const std::byte> bytes, const std::string& entry) {
-  zip_error_t error;
-  zip_error_init(&error);
-  zip_source_t* source = zip_source_buffer_create(bytes.data(), bytes.size(), 0, &error);
-  zip_t* archive = source != nullptr ? zip_open_from_source(source, ZIP_RDONLY, &error) : nullptr;
   bool found = false;
-  if (archive == nullptr) {
-    if (source != nullptr) zip_source_free(source);
-  } else {
-    found = zip_name_locate(archive, entry.c_str(), 0) >= 0;
-    zip_discard(archive);
-  }
-  zip_error_fini(&error);
+  withZip(bytes, [&](zip_t* archive) { found = zip_name_locate(archive, entry.c_str(), 0) >= 0; });
   return found;
 }
 
