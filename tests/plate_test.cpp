@@ -626,7 +626,8 @@ TEST_F(PlateTest, APartThatIsNotClosedIsSaid) {
   std::fclose(out);
   const std::string summary(text, size);
   std::free(text);
-  EXPECT_NE(summary.find("part 'o': mesh not closed: 3 boundary, 0 non-manifold, 0 inconsistent edges"),
+  EXPECT_NE(summary.find("part 'o': mesh not closed or not consistently oriented: 3 boundary, 0 "
+                         "non-manifold, 0 inconsistent edges"),
             std::string::npos)
       << summary;
   EXPECT_EQ(summary.find("part 'c': mesh not closed"), std::string::npos) << summary;

@@ -1040,7 +1040,8 @@ void printPlateSummary(std::FILE* out, const PlateResult& r) {
   for (const PlatePartResult& p : r.parts)
     if (p.edgesCounted && (p.edges.boundary > 0 || p.edges.nonManifold > 0 || p.edges.inconsistent > 0))
       std::fprintf(out,
-                   "part '%s': mesh not closed: %llu boundary, %llu non-manifold, %llu inconsistent edges\n",
+                   "part '%s': mesh not closed or not consistently oriented: %llu boundary, %llu "
+                   "non-manifold, %llu inconsistent edges\n",
                    p.name.c_str(), static_cast<unsigned long long>(p.edges.boundary),
                    static_cast<unsigned long long>(p.edges.nonManifold),
                    static_cast<unsigned long long>(p.edges.inconsistent));
