@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <functional>
 #include <span>
+#include <string>
 #include <vector>
 
 namespace toposlice {
@@ -16,6 +17,13 @@ using ChunkBody = std::function<void(std::size_t begin, std::size_t end)>;
 // The most worker threads a job may ask for (--threads, a job file's "threads"; 0 means all cores): a
 // count beyond any machine is a typing mistake.
 inline constexpr unsigned kMaxThreads = 4096;
+
+// What is wrong with a thread count a command line gives, as the job files say it; "" when nothing is.
+inline std::string threadCountProblem(unsigned threads) {
+  if (threads <= kMaxThreads) return "";
+  return "must be between 0 (all cores) and " + std::to_string(kMaxThreads) + ", got " +
+         std::to_string(threads);
+}
 
 struct ChunkRunner {
   // Calls body(begin, end) on disjoint chunks covering [0, count), each about `grain` indices long.

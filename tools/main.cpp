@@ -621,10 +621,8 @@ int run(int argc, char** argv) {
     }
     app.parse(argc, argv);
     // The job files' bound too (settings.threads): a count beyond any machine is a typing mistake.
-    if (common.threads > kMaxThreads)
-      throw CLI::ValidationError("--threads", "must be between 0 (all cores) and " +
-                                                  std::to_string(kMaxThreads) + ", got " +
-                                                  std::to_string(common.threads));
+    if (const std::string problem = threadCountProblem(common.threads); !problem.empty())
+      throw CLI::ValidationError("--threads", problem);
     outputs.insert(outputs.end(), contourOutputs.begin(), contourOutputs.end());
     // An option given an empty value (--masks "", --z "") is a mistake, not the option left out.
     for (const CLI::App* c : app.get_subcommands())

@@ -750,10 +750,9 @@ int run(int argc, char** argv) {
   plate->add_flag("-q,--quiet", options.quiet, "No summary; warnings and errors are still printed");
   try {
     app.parse(argc, argv);
-    if (options.threads > kMaxThreads)  // as toposlice's --threads and the job files' "threads"
-      throw CLI::ValidationError("--threads", "must be between 0 (all cores) and " +
-                                                  std::to_string(kMaxThreads) + ", got " +
-                                                  std::to_string(options.threads));
+    // As toposlice's --threads and the job files' "threads".
+    if (const std::string problem = threadCountProblem(options.threads); !problem.empty())
+      throw CLI::ValidationError("--threads", problem);
   } catch (const CLI::ParseError& e) {
     // Every rank parses the same command line; rank 0 alone answers. As in toposlice: help and version
     // as CLI11 prints them, a usage error as one line with status 2.

@@ -273,11 +273,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   std::vector<std::size_t> partStart;  // per member: index of its model in meshes (its features follow)
   ContourJob contourJob;
   contourJob.name = job.parts[members[0]].name;
-  contourJob.bounds = extent;  // grown by a growing absolute_correction: it holds every corrected contour
-  if (const float grow = static_cast<float>(std::max(0.0, print.absoluteCorrection)); grow > 0) {
-    contourJob.bounds.min = {extent.min.x - grow, extent.min.y - grow, extent.min.z};
-    contourJob.bounds.max = {extent.max.x + grow, extent.max.y + grow, extent.max.z};
-  }
+  contourJob.bounds = contourExtent(extent, print);
   contourJob.layerCount = static_cast<uint32_t>(planes.size());
   for (std::size_t m = 0; m < members.size(); ++m) {
     const std::size_t p = members[m];

@@ -200,6 +200,14 @@ void recordDisplayOptions(PrintSettings& print, MaskOptions& o, const char* reso
   }
 }
 
+BoundingBox contourExtent(const BoundingBox& box, const PrintSettings& print) {
+  const float grow = static_cast<float>(std::max(0.0, print.absoluteCorrection));
+  BoundingBox out = box;
+  out.min = {box.min.x - grow, box.min.y - grow, box.min.z};
+  out.max = {box.max.x + grow, box.max.y + grow, box.max.z};
+  return out;
+}
+
 bool landscapeOnlyFormat(const std::string& ext) {
   return ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
 }
@@ -922,11 +930,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
       extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
     }
-    job.bounds = extent;
-    if (const float grow = static_cast<float>(std::max(0.0, print.absoluteCorrection)); grow > 0) {
-      job.bounds.min = {extent.min.x - grow, extent.min.y - grow, extent.min.z};
-      job.bounds.max = {extent.max.x + grow, extent.max.y + grow, extent.max.z};
-    }
+    job.bounds = contourExtent(extent, print);
     job.layerCount = static_cast<uint32_t>(planes.size());
     const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
       std::string name = path.stem().string();

@@ -83,6 +83,10 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
 // the user set is left for makeMaskJob to refuse. Other outputs: unchanged.
 PrintSettings settingsForMaskFormat(PrintSettings print, const std::filesystem::path& masks);
 
+// The extent of a job's contours (a CLI's $$DIMENSION, an SVG's panels): `box` (the model's and its
+// add-ons') grown in x and y by a positive absolute_correction, so that it holds every corrected contour.
+BoundingBox contourExtent(const BoundingBox& box, const PrintSettings& print);
+
 // Whether masks of extension `ext` are landscape whatever the display: .exr and .vdb (volumes in the
 // model's frame), .goo and .nanodlp (landscape images).
 bool landscapeOnlyFormat(const std::string& ext);
