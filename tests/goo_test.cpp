@@ -478,6 +478,22 @@ TEST_F(GooCli, HeaderCarriesTheProfileSettings) {
   EXPECT_EQ(layers.back().liftDistance, 7.0f);
   EXPECT_EQ(layers.back().liftSpeed, 80.0f);
   EXPECT_EQ(h.transitionLayers, 8u);  // the sl1 preset's 10 faded layers - 2
+  EXPECT_EQ(h.printerName, "SL1");
+
+  // The printer's name: a generic preset's, not the SL1 model its SL1 archives carry; one the user
+  // gives, as given.
+  ASSERT_EQ(run({"slice", tool_test::examplePart().string(), "-H", "0.5", "--printer", "generic-8k", "-q",
+                 "--masks", "g.goo"})
+                .code(),
+            0);
+  ASSERT_EQ(decodeGoo(readFile(path("g.goo")), h, layers), "");
+  EXPECT_EQ(h.printerName, "generic-8k");
+  ASSERT_EQ(run({"slice", tool_test::examplePart().string(), "-H", "0.5", "--printer", "generic-8k", "-q",
+                 "--masks", "n.goo", "--printer-model", "Saturn"})
+                .code(),
+            0);
+  ASSERT_EQ(decodeGoo(readFile(path("n.goo")), h, layers), "");
+  EXPECT_EQ(h.printerName, "Saturn");
 
   // A stack shorter than the fade: as many transition layers as there are after the bottom one (a
   // one-layer file said 8).

@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -284,6 +285,18 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   // EXR and VDB stacks are volumes in the model's frame, GOO and NanoDLP files landscape images: a
   // preset's portrait display (sl1, sl1s) and its mirroring, which belongs to it, do not apply to them.
   const std::string ext = lowerExtension(o.output);
+  // GOO's printer name: a built-in generic preset's printer_model is the SL1 model that SL1 archives
+  // need, not a name of the printer; the preset's own name is.
+  if (ext == ".goo" && setByPrinter(print, "printer_model")) {
+    const std::optional<PrinterPreset> preset = findPrinter(print.printerName);
+    if (preset && print.printerModel == preset->model &&
+        !std::equal(print.printerModel.begin(), print.printerModel.end(), print.printerName.begin(),
+                    print.printerName.end(), [](char a, char b) {
+                      return std::tolower(static_cast<unsigned char>(a)) ==
+                             std::tolower(static_cast<unsigned char>(b));
+                    }))
+      job.printerModel = preset->name;
+  }
   if (ext == ".goo" && print.printerModel.size() > 31)  // it was cut off there without a word
     throw InputError(o.output.string() + ": printer_model '" + print.printerModel + "' has " +
                      std::to_string(print.printerModel.size()) +
