@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 #include <zip.h>
 
+#include <algorithm>
+#include <cstdint>
 #include <filesystem>
 #include <map>
 #include <string>
@@ -104,9 +106,10 @@ TEST_F(NanoDlpCli, LayersEqualThePngLayersOfTheSameJob) {
   const auto entries = zipEntries(path("p.nanodlp"));
   const auto folder = tool_test::directoryContents(path("png"));
   ASSERT_EQ(folder.size(), 62u);  // ceil(6.2 / 0.1)
-  for (const char* name : {"meta.json", "plate.json", "profile.json", "info.json", "3d.png"})
+  for (const char* name :
+       {"meta.json", "plate.json", "profile.json", "info.json", "options.json", "slicer.json", "3d.png"})
     EXPECT_EQ(entries.count(name), 1u) << name;
-  EXPECT_EQ(entries.size(), folder.size() + 5);
+  EXPECT_EQ(entries.size(), folder.size() + 7);
   std::size_t k = 0;
   for (const auto& [name, bytes] : folder) {  // names sort in layer order
     const auto it = entries.find(std::to_string(k + 1) + ".png");
@@ -138,6 +141,45 @@ TEST_F(NanoDlpCli, LayersEqualThePngLayersOfTheSameJob) {
   EXPECT_EQ(profile["TransitionalLayer"], 8);  // the sl1 preset's 10 faded layers - 2
   EXPECT_EQ(profile["BottomLiftDistance"], 5.0);
   EXPECT_EQ(profile["BottomLiftSpeed"], 65.0);
+  // NanoDLP's own names, as UVtools and mslicer read them (mslicer: whole numbers without a point).
+  EXPECT_EQ(profile.at("Depth").dump(), "100");
+  EXPECT_EQ(profile.at("SupportDepth").dump(), "100");
+  EXPECT_EQ(profile.at("WaitHeight").dump(), "5");
+  EXPECT_EQ(profile.at("SupportWaitHeight").dump(), "5");
+  EXPECT_EQ(profile.at("SupportLayerNumber").dump(), "1");
+  // The options readers take the display from: UVtools reads slicer.json, NanoDLP options.json.
+  EXPECT_EQ(entries.at("options.json"), entries.at("slicer.json"));
+  const auto options = nlohmann::json::parse(entries.at("slicer.json"));
+  EXPECT_EQ(options.at("PWidth"), 2560);  // the sl1 preset's display, landscape
+  EXPECT_EQ(options.at("PHeight"), 1440);
+  EXPECT_NEAR(options.at("XPixelSize").get<double>(), 0.04725, 1e-12);
+  EXPECT_NEAR(options.at("YPixelSize").get<double>(), 0.04725, 1e-12);
+  EXPECT_EQ(options.at("Thickness"), 100);
+  EXPECT_EQ(options.at("LayerCount"), 62);
+  EXPECT_EQ(options.at("ImageMirror"), 0);
+  EXPECT_EQ(options.at("Boundary"), (nlohmann::json{{"XMin", plate["XMin"]},
+                                                    {"XMax", plate["XMax"]},
+                                                    {"YMin", plate["YMin"]},
+                                                    {"YMax", plate["YMax"]},
+                                                    {"ZMin", plate["ZMin"]},
+                                                    {"ZMax", plate["ZMax"]}}));
+  // The plate's bounds: mm from the display's centre (y down the picture), the union of the layers'
+  // pixel bounds, as UVtools computes them from the pictures.
+  uint32_t minX = UINT32_MAX, minY = UINT32_MAX, maxX = 0, maxY = 0;
+  for (const auto& layer : info) {
+    minX = std::min(minX, layer["MinX"].get<uint32_t>());
+    minY = std::min(minY, layer["MinY"].get<uint32_t>());
+    maxX = std::max(maxX, layer["MaxX"].get<uint32_t>());
+    maxY = std::max(maxY, layer["MaxY"].get<uint32_t>());
+  }
+  const double p = 0.04725, halfWidth = 2560 * p / 2, halfHeight = 1440 * p / 2;
+  EXPECT_NEAR(plate["XMin"].get<double>(), minX * p - halfWidth, 1e-9);
+  EXPECT_NEAR(plate["XMax"].get<double>(), (maxX + 1) * p - halfWidth, 1e-9);
+  EXPECT_NEAR(plate["YMin"].get<double>(), minY * p - halfHeight, 1e-9);
+  EXPECT_NEAR(plate["YMax"].get<double>(), (maxY + 1) * p - halfHeight, 1e-9);
+  EXPECT_LT(plate["XMin"].get<double>(), 0);  // the part sits about the display's centre
+  EXPECT_GT(plate["XMax"].get<double>(), 0);
+  EXPECT_NEAR(plate["ZMax"].get<double>(), 6.2, 1e-9);
   expectNoTemporaries();
   // A stack shorter than the fade: as many transition layers as there are after the bottom one.
   auto one = args;

@@ -47,6 +47,18 @@ Json infoJson(const NanoDlpLayerInfo& i) {
   return j;
 }
 
+// A number as readers with integer fields take it: a whole value without a decimal point (mslicer reads
+// several NanoDLP fields, the waits and lift heights among them, as unsigned integers), else as it is.
+Json number(double v) {
+  if (std::isfinite(v) && v == std::round(v) && std::fabs(v) < 9.0e15) return Json(static_cast<int64_t>(v));
+  return Json(v);
+}
+
+// Micrometres of a length in mm, to the nanometre (a layer height given in mm, shown in um).
+double micrometres(double mm) {
+  return std::round(mm * 1.0e6) / 1000.0;
+}
+
 uint32_t fadeLayersOf(const MaskJob& job) {
   return std::clamp<uint32_t>(job.fadeLayers, 2, 200);
 }
@@ -102,27 +114,40 @@ class NanoDlpSink final : public EncodingMaskSink {
     zip_.add("info.json", info_);
     const double p = job.grid.pixel;
     const bool lit = minX_ <= maxX_;
+    // The lit bounds in mm from the display's centre, x to the right and y down the picture, as UVtools
+    // and mslicer write them (NanoDLP's manual does not say); all 0 for a stack without a lit pixel.
+    const double halfWidth = job.grid.width * p / 2, halfHeight = job.grid.height * p / 2;
+    const auto nanometres = [](double mm) { return std::round(mm * 1.0e6) / 1.0e6; };
+    Json bounds;
+    bounds["XMin"] = lit ? nanometres(minX_ * p - halfWidth) : 0.0;
+    bounds["XMax"] = lit ? nanometres((maxX_ + 1) * p - halfWidth) : 0.0;
+    bounds["YMin"] = lit ? nanometres(minY_ * p - halfHeight) : 0.0;
+    bounds["YMax"] = lit ? nanometres((maxY_ + 1) * p - halfHeight) : 0.0;
+    bounds["ZMin"] = 0.0;
+    bounds["ZMax"] = next_ * job.layerHeight;
     Json plate;
     plate["Processed"] = true;
     plate["LayersCount"] = next_;
     plate["TotalSolidArea"] = totalArea_;
-    plate["XMin"] = lit ? minX_ * p : 0.0;
-    plate["XMax"] = lit ? (maxX_ + 1) * p : 0.0;
-    plate["YMin"] = lit ? minY_ * p : 0.0;
-    plate["YMax"] = lit ? (maxY_ + 1) * p : 0.0;
-    plate["ZMin"] = 0.0;
-    plate["ZMax"] = next_ * job.layerHeight;
+    plate.update(bounds);
     plate["Volume"] = job.volumeMl * 1000;  // mm^3
     zip_.add("plate.json", plate.dump());
+    const double depth = micrometres(job.layerHeight);
+    const uint32_t transitional = std::min(fadeLayersOf(job) - 2, next_ > 0 ? next_ - 1 : 0);
     Json profile;
     profile["Title"] = "toposlice";
-    profile["Depth"] = std::lround(job.layerHeight * 1000);  // layer thickness, micrometres
-    profile["CureTime"] = job.exposureTime;
-    profile["SupportCureTime"] = job.initialExposureTime;
+    profile["Depth"] = number(depth);  // layer thickness, micrometres
+    profile["SupportDepth"] = number(depth);
+    profile["CureTime"] = number(job.exposureTime);
+    profile["SupportCureTime"] = number(job.initialExposureTime);
     profile["SupportLayerNumber"] = 1;
     // As many transition layers as the file has after its bottom layer at most.
-    profile["TransitionalLayer"] = std::min(fadeLayersOf(job) - 2, next_ > 0 ? next_ - 1 : 0);
-    profile["WaitBeforePrint"] = job.waitBeforeExposure;
+    profile["TransitionalLayer"] = transitional;
+    profile["WaitBeforePrint"] = number(job.waitBeforeExposure);
+    profile["SupportWaitBeforePrint"] = number(job.waitBeforeExposure);
+    profile["WaitHeight"] = number(job.liftDistance);  // NanoDLP's names of the lift heights
+    profile["SupportWaitHeight"] = number(job.bottomLiftDistance);
+    // toposlice's own names: NanoDLP has no fields for the speeds and the pixel grid in its profile.
     profile["LiftDistance"] = job.liftDistance;
     profile["LiftSpeed"] = job.liftSpeed;
     profile["BottomLiftDistance"] = job.bottomLiftDistance;
@@ -132,6 +157,32 @@ class NanoDlpSink final : public EncodingMaskSink {
     profile["YPixels"] = job.grid.height;
     profile["PixelSize"] = p * 1000;  // micrometres
     zip_.add("profile.json", profile.dump());
+    // The slicer's options: where readers (UVtools reads slicer.json, mslicer options.json or
+    // slicer.json, NanoDLP options.json) take the display's pixels and pixel size from.
+    Json options;
+    options["PWidth"] = job.grid.width;
+    options["PHeight"] = job.grid.height;
+    options["Thickness"] = number(depth);
+    options["SupportDepth"] = number(depth);
+    options["SupportLayerNumber"] = 1;
+    options["XOffset"] = job.grid.width / 2;
+    options["YOffset"] = job.grid.height / 2;
+    options["XPixelSize"] = p;  // mm
+    options["YPixelSize"] = p;
+    options["XRes"] = number(micrometres(p));
+    options["YRes"] = number(micrometres(p));
+    options["Boundary"] = bounds;
+    options["ImageMirror"] = job.grid.mirrorX ? 1 : 0;
+    options["DisplayController"] = 1;
+    options["IgnoreMask"] = 1;
+    options["FillColor"] = "#ffffff";
+    options["BlankColor"] = "#000000";
+    options["LayerCount"] = next_;
+    options["PreviewWidth"] = kPreviewWidth;
+    options["PreviewHeight"] = kPreviewHeight;
+    const std::string optionsText = options.dump();
+    zip_.add("options.json", optionsText);
+    zip_.add("slicer.json", optionsText);
     Json meta;
     meta["FormatVersion"] = 1;
     meta["Distro"] = "generic";
