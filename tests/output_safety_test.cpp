@@ -1124,6 +1124,38 @@ TEST_F(OptionChecks, APortraitLightMapForLandscapeMasksIsSaidToBeTurned) {
             0);
 }
 
+// Batch and plate --explain read the light map as their runs do (they approved a map the run refused).
+TEST_F(OptionChecks, BatchAndPlateExplainReadTheLightMap) {
+  writeBytes(path("light.png"), sl1LightMapPng(220));
+  const std::string part = jsonString(examplePart().string());
+  const std::string settings = R"("print_settings": {"light_map": "light.png"})";
+  writeBytes(path("batch.json"),
+             R"({"version": 1, "template": {"model": )" + part +
+                 R"(}, "settings": {"layer_height": 1, "printer": "sl1", "antialias": true, )" + settings +
+                 R"(}, "variants": [{"name": "v", "model": )" + part +
+                 R"(, "masks": "v.sl1"}, {"name": "w", "model": )" + part + R"(, "masks": "w.goo"}]})");
+  writeBytes(
+      path("plate.json"),
+      R"({"printer": "sl1", )" + settings +
+          R"(, "settings": {"layer_height": 1, "antialias": true}, "parts": [{"name": "a", "model": )" +
+          part + R"(, "placement": "auto"}], "outputs": {"masks": "p.goo"}})");
+  for (const char* command : {"batch", "plate"}) {
+    const std::string job = path(std::string(command) + ".json").string();
+    const RunResult explained = run({command, job, "--explain"});
+    expectOneErrorLine(explained);
+    EXPECT_TRUE(contains(explained.err, "light.png: the light map is 1440x2560 pixels, the masks 2560x1440"))
+        << explained.err;
+    if (command == std::string("batch")) {
+      EXPECT_TRUE(contains(explained.err, "batch.json: variant 'w': "));
+    }
+    const RunResult ran = run({command, job, "-q"});
+    expectOneErrorLine(ran);
+    EXPECT_EQ(explained.err, ran.err) << command;
+  }
+  EXPECT_FALSE(fs::exists(path("v.sl1")));
+  EXPECT_FALSE(fs::exists(path("p.goo")));
+}
+
 TEST_F(OptionChecks, UnknownMaskExtensionListsTheKnownOnes) {
   const RunResult r = run({"slice", examplePart().string(), "--masks", "layers.zip", "--printer", "sl1"});
   expectOneErrorLine(r);

@@ -1,5 +1,7 @@
 #include "tools/batch_plan.h"
 
+#include <set>
+
 #include <algorithm>
 #include <chrono>
 #include <system_error>
@@ -20,6 +22,7 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
   // The printer, material and profile first: a typo there fails at once, before a table is built and
   // saved and every variant then fails on it.
   batchJobSettings(job);
+  checkBatchMaskImages(job);
   BatchTemplate t;
   const auto readTemplateModel = [&job] {
     FacetSoup soup = readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale});
@@ -186,6 +189,22 @@ MaskOptions batchMaskOptions(const BatchJob& job, const std::filesystem::path& m
   o.fitAdvice = "set settings.origin to move the image, or use a smaller model or larger pixels";
   recordDisplayOptions(print, o, "settings.resolution", "settings.pixel");
   return o;
+}
+
+void checkBatchMaskImages(const BatchJob& job) {
+  std::set<std::string> formats;
+  for (const BatchVariant& v : job.variants) {
+    if (v.masks.empty() || !formats.insert(lowerExtension(v.masks)).second) continue;
+    PrintSettings print = batchJobSettings(job);
+    MaskOptions o = batchMaskOptions(job, v.masks, print);
+    o.crop = true;  // no model: its extent only places the image
+    print = settingsForMaskFormat(print, v.masks);
+    try {
+      maskTransfer(print, makeMaskJob(o, print, BoundingBox{}, v.masks.stem().string(), {}));
+    } catch (const InputError& e) {
+      throw InputError(job.sourceFile.string() + ": variant '" + v.name + "': " + e.what());
+    }
+  }
 }
 
 SliceJobOptions batchSliceOptions(const BatchJob& job, const BatchVariant& variant,

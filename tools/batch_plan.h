@@ -48,6 +48,11 @@ PrintSettings batchJobSettings(const BatchJob& job);
 // settings (recordDisplayOptions), so that --explain says what the images have.
 MaskOptions batchMaskOptions(const BatchJob& job, const std::filesystem::path& masks, PrintSettings& print);
 
+// The image's own checks of every mask format the variants write, as a variant's run makes them, without a
+// model (a size and a pixel pitch, an orientation the format carries, the light map against the display),
+// once per format, before any variant. Throws InputError naming the job and the first such variant.
+void checkBatchMaskImages(const BatchJob& job);
+
 // The runSliceJob options for one variant: the job's planes (default layer height 0.05 mm when none is
 // given), method, join tolerance, overwrite, mask settings, features and report, with `table` as the
 // template. Throws InputError for an unknown method.

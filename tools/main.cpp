@@ -356,6 +356,7 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
   batchMaskOptions(job, {}, print);  // settings.resolution and settings.pixel, as the display's settings
   for (const BatchVariant& v : job.variants)
     checkMaskSettings(print, job.antialias, !v.masks.empty(), "antialias");
+  checkBatchMaskImages(job);  // the light map too, as the run does before any variant
   explainPrintSettings(print, masks, job.antialias,
                        "each variant's bounding-box centre in x and y and its lowest z");
   return 0;
@@ -366,6 +367,7 @@ int explainPlateSettings(const std::filesystem::path& jobPath, const std::filesy
   const PlateJob job = readPlateCommandJob(jobPath, outputDir);
   const PrintSettings print = plateJobSettings(job);
   checkMaskSettings(print, job.antialias, !job.masks.empty(), "settings.antialias");
+  checkPlateMaskSettings(job);
   std::printf("plate job  : %s (%zu parts)\n", jobPath.c_str(), job.parts.size());
   explainPrintSettings(print, job.masks, job.antialias,
                        "each part's own centre (its model's bounding box in x and y, lowest z), along the "

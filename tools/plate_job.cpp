@@ -245,6 +245,23 @@ struct PlateSlice {
   double volumeMl = 0;
 };
 
+// The mask options of a plate written to `out`: the plate's display, the image's origin at the plate's
+// corner.
+MaskOptions plateMaskOptions(const PlateJob& job, const PrintSettings& print, const PlateGeometry& geometry,
+                             const std::filesystem::path& out) {
+  MaskOptions o;
+  o.printer = print.printerName;
+  o.pixel = geometry.pixel;
+  o.resolution = std::pair<uint32_t, uint32_t>{geometry.width, geometry.height};
+  o.origin = std::pair<double, double>{0.0, 0.0};
+  o.mirrorX = job.mirrorX.value_or(false);
+  o.mirrorY = job.mirrorY.value_or(false);
+  o.antialias = job.antialias;
+  o.output = out;  // the format decides whether a portrait printer's orientation applies
+  o.fitAdvice = "every part must lie on the plate's display: check the placements and the corrections";
+  return o;
+}
+
 // Slices the parts `members` of one plate together and writes its outputs into the transaction.
 PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std::size_t>& members,
                       std::vector<LoadedPart>& loaded, std::vector<PlatePartResult>& results,
@@ -307,17 +324,8 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   std::unique_ptr<MaskSink> maskSink;
   MaskTransfer transfer;  // gamma and the light-uniformity map of every mask
   if (masks) {
-    MaskOptions o;
-    o.printer = print.printerName;
-    o.pixel = geometry.pixel;
-    o.resolution = std::pair<uint32_t, uint32_t>{geometry.width, geometry.height};
-    o.origin = std::pair<double, double>{0.0, 0.0};
-    o.mirrorX = job.mirrorX.value_or(false);
-    o.mirrorY = job.mirrorY.value_or(false);
-    o.antialias = job.antialias;
     const std::filesystem::path out = plateOutputPath(job.masks, plate);
-    o.output = out;  // the format decides whether a portrait printer's orientation applies
-    o.fitAdvice = "every part must lie on the plate's display: check the placements and the corrections";
+    const MaskOptions o = plateMaskOptions(job, print, geometry, out);
     std::string name = out.stem().string();
     try {
       maskJob = makeMaskJob(o, print, extent, name, planes);
@@ -650,6 +658,14 @@ PrintSettings plateJobSettings(const PlateJob& job) {
   return print;
 }
 
+void checkPlateMaskSettings(const PlateJob& job) {
+  if (job.masks.empty()) return;
+  const PrintSettings print = givenPlateSettings(job);
+  MaskOptions o = plateMaskOptions(job, print, plateGeometry(job, print), plateOutputPath(job.masks, 0));
+  o.crop = true;  // no parts: the image's own checks only
+  maskTransfer(print, makeMaskJob(o, print, BoundingBox{}, "plate", {}));
+}
+
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {
   impl_->job = std::move(given);
   const PlateJob& job = impl_->job;
@@ -665,6 +681,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
                      " mm is more than the plate's diagonal (" + formatNumber(diagonal) +
                      " mm): no two parts could share a plate");
   checkMaskSettings(print, job.antialias, !job.masks.empty(), "settings.antialias");
+  checkPlateMaskSettings(job);  // the light map against the display, before any part is read
   PlateResult& result = impl_->result;
   const std::size_t count = job.parts.size();
   std::vector<std::filesystem::path> inputs{job.sourceFile, job.profile, print.lightMap};
