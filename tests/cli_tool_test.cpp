@@ -1239,8 +1239,8 @@ double areaLeftOf(const std::vector<Point2d>& poly, double xmax) {
 
 // Model: a 20 x 10 x 5 box. Add-on: a 6 x 6 block z 4..7 at y 6..12, half in the model (winding 2) and
 // half beside it. Removal: a 32-sided cylinder r = 2 at (19, 5), z 2..6, reaching 1 mm beyond the
-// model's side (winding -1 there, which the positive rule leaves empty). Planes (from the model's
-// height) every 0.5 mm from 0.25 to 4.75.
+// model's side (winding -1 there, which the positive rule leaves empty). Planes every 0.5 mm from 0.25
+// to 6.75: the default planes cover the add-on above the model too.
 TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea) {
   writeBinaryStl(path("model.stl"), fixtures::box(0, 0, 0, 20, 10, 5), "model", false);
   writeBinaryStl(path("knob.stl"), fixtures::box(2, 6, 4, 8, 12, 7), "add-on", false);
@@ -1274,7 +1274,7 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
   const ParsedCli cli = parseAsciiCli(text);
   EXPECT_EQ(cli.labels, (std::vector<std::string>{"1,model", "2,add knob", "3,remove bore"}));
   const auto rows = splitLines(readBytes(path("r.csv")));
-  constexpr std::size_t kLayers = 10;
+  constexpr std::size_t kLayers = 14;
   ASSERT_EQ(cli.layers.size(), kLayers);
   ASSERT_EQ(rows.size(), kLayers + 1);  // the header and one row per layer
   std::vector<Point2d> section;         // the cylinder's cross-section, counter-clockwise
@@ -1285,7 +1285,7 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
   const double bore = signedArea(section), cut = areaLeftOf(section, 20);
   for (std::size_t k = 0; k < kLayers; ++k) {
     const double z = 0.25 + 0.5 * static_cast<double>(k);
-    const double expected = z < 2 ? 200 : z < 4 ? 200 - cut : 200 - cut + 12;
+    const double expected = z < 2 ? 200 : z < 4 ? 200 - cut : z < 5 ? 200 - cut + 12 : 36;
     std::vector<std::vector<Point2d>> loops;
     double removalArea = 0;
     int removalLoops = 0;
@@ -1299,7 +1299,7 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
       EXPECT_EQ(poly.dir, 0) << "a removal's outer loop, reversed, is clockwise: layer " << k;
     }
     // The removal is written reversed: negative area where it is cut.
-    EXPECT_EQ(removalLoops, z > 2 ? 1 : 0) << "layer " << k;
+    EXPECT_EQ(removalLoops, z > 2 && z < 6 ? 1 : 0) << "layer " << k;
     if (removalLoops > 0) {
       EXPECT_NEAR(removalArea, -bore, 1e-4) << "layer " << k;
     }
@@ -1313,10 +1313,10 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
   }
 
   // Without features the model's output is what it always was: the same bytes as the feature file
-  // without the features' labels and polylines, and with the model's extent (the feature file's holds
-  // the add-on, which reaches 2 mm beyond the model in y).
-  const RunResult alone =
-      run({"slice", path("model.stl").string(), "-H", "0.5", "-o", path("m.cli").string(), "-q"});
+  // (on its planes) without the features' labels and polylines, and with the model's extent (the feature
+  // file's holds the add-on, which reaches 2 mm beyond the model in y and z, and the removal).
+  const RunResult alone = run({"slice", path("model.stl").string(), "-H", "0.5", "--layers", "14", "-o",
+                               path("m.cli").string(), "-q"});
   ASSERT_EQ(alone.code(), 0) << alone.describe();
   std::string filtered;
   for (const std::string& line : splitLines(text)) {
@@ -1324,7 +1324,7 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
         line.starts_with("$$POLYLINE/2,") || line.starts_with("$$POLYLINE/3,"))
       continue;
     if (line.starts_with("$$DIMENSION/")) {
-      EXPECT_EQ(line, "$$DIMENSION/0.000000,0.000000,0.000000,20.000000,12.000000,5.000000");
+      EXPECT_EQ(line, "$$DIMENSION/0.000000,0.000000,0.000000,21.000000,12.000000,7.000000");  // bore: x 21
       filtered += "$$DIMENSION/0.000000,0.000000,0.000000,20.000000,10.000000,5.000000\n";
       continue;
     }
@@ -1342,7 +1342,7 @@ TEST_F(CliToolFeatures, ContourOutputsCarryLabelledPartsThatCombineToTheMaskArea
        at = svg.find("<polygon class=\"remove\"", at + 1))
     ++removals;
   EXPECT_EQ(groups, 3 * kLayers);
-  EXPECT_EQ(removals, 6u);  // planes 2.25 .. 4.75
+  EXPECT_EQ(removals, 8u);  // planes 2.25 .. 5.75
   EXPECT_TRUE(contains(svg, "<title>remove bore</title>"));
   expectNoTemporaries();
 }

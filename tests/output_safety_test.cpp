@@ -600,6 +600,36 @@ TEST_F(EmptyResults, InsideOutFeatureIsAWarningAndFlippedOnRequest) {
   EXPECT_GT(whole - cut, 0.05);
 }
 
+// An add-on reaching above or below the model (a base, a tall label) is part of the print: the default
+// planes cover it (it was cut off at the model's height, silently), and the build height counts it.
+TEST_F(EmptyResults, AddOnsBeyondTheModelsHeightAreSlicedWhole) {
+  writeBytes(path("model.stl"), boxStl(10, 0, false));  // z 0 .. 10
+  writeBytes(path("tall.stl"), boxStl(4, 8, false));    // z 8 .. 12
+  writeBytes(path("low.stl"), boxStl(4, -3, false));    // z -3 .. 1
+  const auto layers = [&](const std::string& addOn, const std::string& tag) {
+    const RunResult r = run({"slice", "model.stl", "-H", "1", "--add", addOn, "-o", tag + ".cli", "--printer",
+                             "sl1", "--masks", tag + ".sl1", "--summary", tag + ".json", "-q"});
+    EXPECT_EQ(r.code(), 0) << r.describe();
+    EXPECT_EQ(r.err, "");  // nothing to warn about: the default planes
+    return nlohmann::json::parse(readBytes(path(tag + ".json")));
+  };
+  const nlohmann::json tall = layers("tall.stl", "t"), low = layers("low.stl", "l");
+  EXPECT_EQ(tall["layers"]["count"], 12);
+  EXPECT_EQ(low["layers"]["count"], 13);
+  EXPECT_EQ(low["layers"]["first_z_mm"], -2.5);
+  EXPECT_TRUE(contains(readBytes(path("l.cli")), "$$LAYER/-2.500000"));
+  EXPECT_NEAR(tall["volume_ml"].get<double>(), 1.0 + 0.064 * 2 / 4, 0.01);  // 2 of the add-on's 4 mm above
+  EXPECT_NEAR(low["volume_ml"].get<double>(), 1.0 + 0.064 * 3 / 4, 0.01);
+  EXPECT_NEAR(low["layers"]["layer_height_mm"].get<double>(), 1.0, 1e-12);
+  const RunResult high = run({"slice", "model.stl", "-H", "1", "--add", "tall.stl", "--printer", "sl1",
+                              "--max-print-height", "11", "--masks", "h.sl1"});
+  expectOneErrorLine(high);
+  EXPECT_TRUE(contains(high.err,
+                       "model.stl: the model with its add-ons is 12 mm tall, more than the printer's "
+                       "max_print_height 11 mm"))
+      << high.err;
+}
+
 TEST_F(EmptyResults, InsideOutMeshWithMasksIsAnErrorAndAWarningWithContours) {
   writeBytes(path("inv.stl"), boxStl(5, 0, true));
   const RunResult masks =

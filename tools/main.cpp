@@ -129,7 +129,8 @@ void addPlaneOptions(CLI::App* app, PlaneOptions& p) {
   p.heightOpt = app->add_option("--layer-height,-H", p.layerHeight, "Layer height in mm (default 0.05)");
   p.layersOpt =
       app->add_option("--layers", p.layers, "Number of layers (with no height: divide the model height)");
-  p.z0Opt = app->add_option("--z0", p.z0, "Bottom of layer 0 in mm (default: the model's lowest z)");
+  p.z0Opt = app->add_option("--z0", p.z0,
+                            "Bottom of layer 0 in mm (default: the lowest z of the model and its add-ons)");
   app->add_option("--z", p.zList, "Explicit plane heights in mm, comma separated, ascending")
       ->excludes(p.heightOpt)
       ->excludes(p.layersOpt)

@@ -112,11 +112,6 @@ void checkPlateOutputs(const PlateJob& job, uint32_t first, uint32_t end,
   });
 }
 
-BoundingBox unite(const BoundingBox& a, const BoundingBox& b) {
-  return {{std::min(a.min.x, b.min.x), std::min(a.min.y, b.min.y), std::min(a.min.z, b.min.z)},
-          {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
-}
-
 BoundingBox partBounds(const LoadedPart& part, std::size_t addCount) {
   BoundingBox box = boundsOf(part.model.corners);
   for (std::size_t i = 0; i < addCount; ++i) box = unite(box, boundsOf(part.features[i].corners));

@@ -688,25 +688,24 @@ void validateSliceOptions(const SliceJobOptions& options) {
 // A job whose planes all miss the model makes nothing: refused. Planes beyond the model's height on one
 // side (a z0 below the model, say) are allowed, with a warning, since a user may mean them.
 static void checkPlanesCutModel(const std::filesystem::path& model, const std::vector<double>& planes,
-                                const SliceJobResult& result, const std::vector<FacetSoup>& features,
-                                const SliceJobOptions& options, std::vector<std::string>& warnings) {
+                                const SliceJobResult& result, const SliceJobOptions& options,
+                                std::vector<std::string>& warnings) {
   if (planes.empty())
     throw InputError(model.string() + ": the planes give no layer to slice (layer height " +
                      formatNumber(options.planes.layerHeight.value_or(0)) + " mm)");
-  float zmin = result.bounds.min.z, zmax = result.bounds.max.z;  // mesh coordinates, printed as such
-  for (std::size_t i = 0; i < options.add.size() && i < features.size(); ++i) {
-    const BoundingBox b = boundsOf(features[i].corners);
-    zmin = std::min(zmin, b.min.z);
-    zmax = std::max(zmax, b.max.z);
-  }
+  const auto zmin = static_cast<float>(result.zBottom),
+             zmax = static_cast<float>(result.zTop);  // mesh floats
   std::size_t outside = 0;
   // A vertex on a plane counts as above it (DESIGN.md): a plane at the bottom cuts nothing, one at the
   // top cuts the facets that rise to it (the top face's outline).
   for (const double z : planes) outside += z <= zmin || z > zmax ? 1 : 0;
-  char span[160];
-  std::snprintf(span, sizeof span, "planes at z %s .. %s mm, the model spans z %s .. %s mm",
-                readableNumber(planes.front()).c_str(), readableNumber(planes.back()).c_str(),
-                readableNumber(zmin).c_str(), readableNumber(zmax).c_str());
+  const bool addOnsBeyond = result.zBottom < result.bounds.min.z || result.zTop > result.bounds.max.z;
+  const auto planeText = [](double z) { return readableNumber(std::round(z * 1e6) / 1e6); };  // 73.425
+  char span[200];
+  std::snprintf(span, sizeof span, "planes at z %s .. %s mm, the model%s spans z %s .. %s mm",
+                planeText(planes.front()).c_str(), planeText(planes.back()).c_str(),
+                addOnsBeyond ? " with its add-ons" : "", readableNumber(zmin).c_str(),
+                readableNumber(zmax).c_str());
   if (outside == planes.size())
     throw InputError(model.string() + ": no plane cuts the model (" + span + "): nothing to slice");
   // The default planes (z0 at the model's bottom, ceil(height / h) layers) may end half a layer above the
@@ -738,7 +737,7 @@ static void writeSliceSummary(OutputFile& file, const std::filesystem::path& mod
   j["layers"] = {{"count", r.stats.layers},
                  {"first_z_mm", planes.front()},
                  {"last_z_mm", planes.back()},
-                 {"layer_height_mm", nominalLayerHeight(options.planes, planes, r.bounds.min.z)}};
+                 {"layer_height_mm", nominalLayerHeight(options.planes, planes, r.zBottom)}};
   j["contours"] = {
       {"segments", r.stats.segments}, {"loops", r.stats.loops}, {"open_polylines", r.stats.openPolylines}};
   // Counted only where the adjacency was built: null (not 0) after a template's table or for cp / sr-lazy.
@@ -865,10 +864,17 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (FacetSoup& f : features) scaleAll(f.corners);
     measures = measureSoup(soup.corners);
   }
-  if (print.maxPrintHeight > 0 &&
-      double{measures.bounds.max.z} - measures.bounds.min.z > print.maxPrintHeight)
-    throw InputError(model.string() + ": the model is " +
-                     formatNumber(measures.bounds.max.z - measures.bounds.min.z) +  // a float: "6.2"
+  result.zBottom = measures.bounds.min.z;
+  result.zTop = measures.bounds.max.z;
+  for (std::size_t i = 0; i < options.add.size(); ++i) {
+    const BoundingBox b = boundsOf(features[i].corners);
+    result.zBottom = std::min<double>(result.zBottom, b.min.z);
+    result.zTop = std::max<double>(result.zTop, b.max.z);
+  }
+  const bool addOnsBeyond = result.zBottom < measures.bounds.min.z || result.zTop > measures.bounds.max.z;
+  if (print.maxPrintHeight > 0 && result.zTop - result.zBottom > print.maxPrintHeight)
+    throw InputError(model.string() + ": the model" + (addOnsBeyond ? " with its add-ons" : "") + " is " +
+                     formatNumber(static_cast<float>(result.zTop - result.zBottom)) +  // a float: "6.2"
                      " mm tall, more than the printer's max_print_height " +
                      formatNumber(print.maxPrintHeight) + " mm" +
                      (print.scales() ? " (after the scaling correction)" : ""));
@@ -922,9 +928,9 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const auto setUpOutputs = [&] {
     const OutputTransaction::Adopt use(outputs);  // this may run on another thread
     std::string error;
-    planes = makePlanes(options.planes, result.bounds.min.z, result.bounds.max.z, error);
+    planes = makePlanes(options.planes, result.zBottom, result.zTop, error);
     if (!error.empty()) throw InputError(model.string() + ": " + error);
-    checkPlanesCutModel(model, planes, result, features, options, result.warnings);
+    checkPlanesCutModel(model, planes, result, options, result.warnings);
     if (masks && planes.size() == 1 && !options.planes.explicitZ.empty())
       throw InputError(
           "--z " + formatNumber(planes[0]) +
@@ -935,15 +941,16 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     job.name = model.stem().string();
     for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
       if (job.name.size() > 4 && job.name.ends_with(ext)) job.name.resize(job.name.size() - 4);
-    // The contours' extent in x and y (a CLI's $$DIMENSION, an SVG's view box): the model's and its
-    // add-ons', grown by a growing absolute_correction, so that it holds every corrected contour.
+    // What is printed: the model and its add-ons (the masks' image is placed on it).
     BoundingBox extent = result.bounds;
-    for (std::size_t i = 0; i < options.add.size(); ++i) {
-      const BoundingBox b = boundsOf(features[i].corners);
-      extent.min = {std::min(extent.min.x, b.min.x), std::min(extent.min.y, b.min.y), extent.min.z};
-      extent.max = {std::max(extent.max.x, b.max.x), std::max(extent.max.y, b.max.y), extent.max.z};
-    }
-    job.bounds = contourExtent(extent, print);
+    for (std::size_t i = 0; i < options.add.size(); ++i)
+      extent = unite(extent, boundsOf(features[i].corners));
+    // The contours' extent (a CLI's $$DIMENSION, an SVG's view box): every part's contours, the
+    // removals' too, grown by a growing absolute_correction, so that it holds every corrected contour.
+    BoundingBox contours = extent;
+    for (std::size_t i = options.add.size(); i < features.size(); ++i)
+      contours = unite(contours, boundsOf(features[i].corners));
+    job.bounds = contourExtent(contours, print);
     job.layerCount = static_cast<uint32_t>(planes.size());
     const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
       std::string name = path.stem().string();
@@ -959,7 +966,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     // Masks: grid and sink (per-slot rasterizer state below).
     if (masks) {
       maskJob = makeMaskJob(options.masks, print, extent, job.name, planes);
-      maskJob.layerHeight = nominalLayerHeight(options.planes, planes, result.bounds.min.z);
+      maskJob.layerHeight = nominalLayerHeight(options.planes, planes, result.zBottom);
       // Archive timestamps come from the model file, so the same input gives the same bytes.
       struct stat info {};
       if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
@@ -1119,7 +1126,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       }
     }
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
-    volumeMm3 += r.area * layerThickness(planes, k, options.planes, result.bounds.min.z);
+    volumeMm3 += r.area * layerThickness(planes, k, options.planes, result.zBottom);
     litArea += r.area;
   };
 

@@ -1,6 +1,7 @@
 // Whole-mesh measures reported by `toposlice info` and the slice summary.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <span>
 
@@ -20,6 +21,12 @@ struct MeshInfo {
 };
 
 BoundingBox boundsOf(std::span<const Point3f> points);
+
+// The smallest box holding both.
+inline BoundingBox unite(const BoundingBox& a, const BoundingBox& b) {
+  return {{std::min(a.min.x, b.min.x), std::min(a.min.y, b.min.y), std::min(a.min.z, b.min.z)},
+          {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
+}
 
 // Signed volume of the soup (divergence theorem, tetrahedra against the bounding-box centre), in double.
 double signedVolume(std::span<const Point3f> corners);

@@ -1,6 +1,6 @@
-// Slicing planes (DESIGN.md): layer k is cut at z_k = z0 + (k + 1/2) h, z0 defaults to the model's
-// lowest z, and the layer count defaults to ceil((zmax - z0) / h). An explicit ascending list of z values
-// may be given instead.
+// Slicing planes (DESIGN.md): layer k is cut at z_k = z0 + (k + 1/2) h, z0 defaults to the lowest z of
+// what is printed (the model and its add-ons), and the layer count defaults to ceil((zmax - z0) / h). An
+// explicit ascending list of z values may be given instead.
 #pragma once
 
 #include <cstdint>
@@ -14,7 +14,7 @@ namespace toposlice {
 struct PlaneSpec {
   std::optional<double> layerHeight;  // h in mm
   std::optional<uint32_t> layers;     // layer count; with no height, h = (zmax - z0) / layers
-  std::optional<double> z0;           // bottom of layer 0; default: the model's lowest z
+  std::optional<double> z0;           // bottom of layer 0; default: zmin
   std::vector<double> explicitZ;      // when not empty, these planes are used as given
 };
 
