@@ -854,13 +854,19 @@ TEST_F(OptionChecks, AFeatureFileGivenTwiceOrAsTheModelIsRefused) {
 
   writeBytes(path("batch.json"), R"({"version": 1, "template": {"model": "box.stl"},
       "settings": {"layer_height": 0.5},
-      "variants": [{"name": "v", "model": "box.stl", "contours": "v.cli", "add": ["tab.stl"],
+      "variants": [{"name": "good", "model": "box.stl", "contours": "good.cli", "add": ["tab.stl"]},
+                   {"name": "v", "model": "box.stl", "contours": "v.cli", "add": ["tab.stl"],
                     "remove": ["link.stl"]}]})");
-  const RunResult batch = run({"batch", "batch.json", "-q"});
-  expectOneErrorLine(batch);
-  EXPECT_TRUE(contains(batch.err, "variant 'v'") && contains(batch.err, "given both as an add-on"))
-      << batch.err;
-  EXPECT_FALSE(fs::exists(path("v.cli")));
+  // Refused before any variant (the good one before it was written first), and by --explain.
+  for (const char* flag : {"-q", "--explain"}) {
+    const RunResult batch = run({"batch", "batch.json", flag});
+    expectOneErrorLine(batch);
+    EXPECT_TRUE(contains(batch.err, "batch.json: variant 'v': ") &&
+                contains(batch.err, "given both as an add-on"))
+        << batch.err;
+    EXPECT_FALSE(fs::exists(path("good.cli")));
+    EXPECT_FALSE(fs::exists(path("v.cli")));
+  }
 
   writeBytes(path("plate.json"), R"({"version": 1, "printer": "sl1", "settings": {"layer_height": 0.5},
       "parts": [{"name": "p", "model": "box.stl", "add": ["tab.stl", "link.stl"], "placement": "auto"}],
@@ -1184,6 +1190,46 @@ TEST_F(OptionChecks, BatchAndPlateExplainReadTheLightMap) {
   }
   EXPECT_FALSE(fs::exists(path("v.sl1")));
   EXPECT_FALSE(fs::exists(path("p.goo")));
+}
+
+// A material named for contours only does nothing unless one of its settings changes them (slice
+// refused it; batch and plate ignored it).
+TEST_F(OptionChecks, AMaterialThatChangesNothingIsRefusedInBatchAndPlate) {
+  writeBytes(path("prof.json"), R"({"materials": {"m": {"exposure_time": 5},
+      "shrinks": {"exposure_time": 5, "material_correction_x": 1.01}}})");
+  const std::string part = jsonString(examplePart().string());
+  const auto batchJob = [&](const std::string& material) {
+    writeBytes(path("batch.json"),
+               R"({"version": 1, "template": {"model": )" + part +
+                   R"(}, "settings": {"layer_height": 2, "profile": "prof.json", "material": ")" + material +
+                   R"("}, "variants": [{"name": "v", "model": )" + part + R"(, "contours": "v.svg"}]})");
+  };
+  const auto plateJob = [&](const std::string& material) {
+    writeBytes(path("plate.json"),
+               R"({"printer": "sl1", "profile": "prof.json", "material": ")" + material +
+                   R"(", "settings": {"layer_height": 2}, "parts": [{"name": "a", "model": )" + part +
+                   R"(, "placement": "auto"}], "outputs": {"contours": ["p.cli"]}})");
+  };
+  for (const char* material : {"m", "default"}) {
+    batchJob(material);
+    const RunResult batch = run({"batch", "batch.json", "-q"});
+    expectOneErrorLine(batch);
+    EXPECT_TRUE(contains(batch.err, "batch.json: settings.material: does nothing in this job: ") &&
+                contains(batch.err, "; its exposures need a variant with masks"))
+        << batch.err;
+    EXPECT_FALSE(fs::exists(path("v.svg")));
+    plateJob(material);
+    const RunResult plate = run({"plate", "plate.json", "-q"});
+    expectOneErrorLine(plate);
+    EXPECT_TRUE(contains(plate.err, "plate.json: material: does nothing in this job: ") &&
+                contains(plate.err, "; its exposures need outputs.masks"))
+        << plate.err;
+    EXPECT_FALSE(fs::exists(path("p.cli")));
+  }
+  batchJob("shrinks");  // its material_correction_x changes the contours
+  EXPECT_EQ(run({"batch", "batch.json", "-q"}).code(), 0);
+  plateJob("shrinks");
+  EXPECT_EQ(run({"plate", "plate.json", "-q"}).code(), 0);
 }
 
 TEST_F(OptionChecks, UnknownMaskExtensionListsTheKnownOnes) {

@@ -1,9 +1,8 @@
 #include "tools/batch_plan.h"
 
-#include <set>
-
 #include <algorithm>
 #include <chrono>
+#include <set>
 #include <system_error>
 
 #include "core/mesh/weld.h"
@@ -14,6 +13,7 @@
 #include "io/readers/mesh_reader.h"
 #include "parallel/parallel.h"
 #include "parallel/variant_screen.h"
+#include "tools/slice_job.h"
 #include "tools/slice_stages.h"
 
 namespace toposlice {
@@ -23,6 +23,7 @@ BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesyste
   // saved and every variant then fails on it.
   batchJobSettings(job);
   checkBatchMaskImages(job);
+  checkBatchFeatureFiles(job);
   BatchTemplate t;
   const auto readTemplateModel = [&job] {
     FacetSoup soup = readMesh(job.templateModel, MeshReadOptions{job.unitMm, job.scale});
@@ -138,6 +139,11 @@ PrintSettings batchJobSettings(const BatchJob& job) {
   // naming slice's options).
   const bool masks = std::any_of(job.variants.begin(), job.variants.end(),
                                  [](const BatchVariant& v) { return !v.masks.empty(); });
+  // A material named for contours only does nothing unless a material_correction changes them.
+  if (!job.material.empty() && !masks)
+    if (const std::string why = unusedMaterialReason(print, false, "the contours", ""); !why.empty())
+      throw InputError(job.sourceFile.string() + ": settings.material: does nothing in this job: " + why +
+                       "; its exposures need a variant with masks");
   // What every variant's masks would refuse, refused once here naming the job's settings (each variant
   // failed with slice's option names): anti-aliasing against gamma_correction 0, a light map on binary
   // masks, a portrait display the user set for masks that are landscape only.
@@ -201,6 +207,16 @@ void checkBatchMaskImages(const BatchJob& job) {
     print = settingsForMaskFormat(print, v.masks);
     try {
       maskTransfer(print, makeMaskJob(o, print, BoundingBox{}, v.masks.stem().string(), {}));
+    } catch (const InputError& e) {
+      throw InputError(job.sourceFile.string() + ": variant '" + v.name + "': " + e.what());
+    }
+  }
+}
+
+void checkBatchFeatureFiles(const BatchJob& job) {
+  for (const BatchVariant& v : job.variants) {
+    try {
+      checkFeatureFiles(v.model, v.add, v.remove);
     } catch (const InputError& e) {
       throw InputError(job.sourceFile.string() + ": variant '" + v.name + "': " + e.what());
     }

@@ -53,6 +53,11 @@ MaskOptions batchMaskOptions(const BatchJob& job, const std::filesystem::path& m
 // once per format, before any variant. Throws InputError naming the job and the first such variant.
 void checkBatchMaskImages(const BatchJob& job);
 
+// Every variant's feature files, before any variant: one given twice, both added and removed, or the
+// variant's model given as its own feature (slice's checkFeatureFiles). Throws InputError naming the job
+// and the variant.
+void checkBatchFeatureFiles(const BatchJob& job);
+
 // The runSliceJob options for one variant: the job's planes (default layer height 0.05 mm when none is
 // given), method, join tolerance, overwrite, mask settings, features and report, with `table` as the
 // template. Throws InputError for an unknown method.

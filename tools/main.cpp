@@ -358,6 +358,7 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
   for (const BatchVariant& v : job.variants)
     checkMaskSettings(print, job.antialias, !v.masks.empty(), "antialias");
   checkBatchMaskImages(job);  // the light map too, as the run does before any variant
+  checkBatchFeatureFiles(job);
   explainPrintSettings(print, masks, job.antialias,
                        "each variant's bounding-box centre in x and y and its lowest z");
   return 0;
@@ -788,20 +789,11 @@ int run(int argc, char** argv) {
     // A material chosen by name for contours only does nothing unless one of its settings changes the
     // contours (a material_correction) or the summary (material_density): its exposures need masks.
     if (slice->count("--material") > 0 && !masks) {
-      std::string materialKeys;
-      bool used = false;
-      for (const auto& [key, from] : options.print.origin) {
-        if (!from.starts_with("material ") && from.find(" material ") == std::string::npos) continue;
-        materialKeys += (materialKeys.empty() ? "" : ", ") + key;
-        used = used || settingUnusedReason(key, maskOutputs, "", !options.summary.empty()).empty();
-      }
-      if (!used)
-        throw InputError(
-            "--material " + material + " does nothing in this job: " +
-            (materialKeys.empty() ? std::string("it changes neither")
-                                  : "none of its settings (" + materialKeys + ") changes") +
-            (materialKeys.empty() ? " the contours nor the summary" : " the contours or the summary") +
-            "; its exposures need mask output (--masks)");
+      const std::string why =
+          unusedMaterialReason(options.print, !options.summary.empty(), "the contours", "the summary");
+      if (!why.empty())
+        throw InputError("--material " + material + " does nothing in this job: " + why +
+                         "; its exposures need mask output (--masks)");
     }
     for (std::size_t i = 0; i < choice.overrides.size(); ++i) {
       const std::string& k = choice.overrides[i].first;

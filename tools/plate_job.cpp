@@ -632,6 +632,14 @@ PrintSettings givenPlateSettings(const PlateJob& job) {
   applyJobMirror(print, job.mirrorX, job.mirrorY, "plate job settings.mirror");
   // The elephant foot's other keys shape its compensation: without one they do nothing (slice refuses them).
   checkElephantFootKeys(print, job.printSettings, job.sourceFile, "print_settings.");
+  // A material named for contours only does nothing unless a material_correction changes them (or its
+  // density the report's resin mass).
+  if (!job.material.empty() && job.masks.empty())
+    if (const std::string why = unusedMaterialReason(print, !job.report.empty(), "the contours",
+                                                     job.report.empty() ? "" : "the report");
+        !why.empty())
+      throw InputError(job.sourceFile.string() + ": material: does nothing in this job: " + why +
+                       "; its exposures need outputs.masks");
   return settingsForMaskFormat(print, job.masks);
 }
 

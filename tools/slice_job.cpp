@@ -209,6 +209,20 @@ BoundingBox contourExtent(const BoundingBox& box, const PrintSettings& print) {
   return out;
 }
 
+std::string unusedMaterialReason(const PrintSettings& print, bool summary, const std::string& written,
+                                 const std::string& report) {
+  std::string keys;
+  for (const auto& [key, from] : print.origin) {
+    if (!from.starts_with("material ") && from.find(" material ") == std::string::npos) continue;
+    if (settingUnusedReason(key, {}, "", summary).empty()) return "";
+    keys += (keys.empty() ? "" : ", ") + key;
+  }
+  if (!keys.empty())
+    return "none of its settings (" + keys + ") changes " + written + (report.empty() ? "" : " or " + report);
+  return report.empty() ? "it does not change " + written
+                        : "it changes neither " + written + " nor " + report;
+}
+
 bool landscapeOnlyFormat(const std::string& ext) {
   return ext == ".exr" || ext == ".vdb" || ext == ".goo" || ext == ".nanodlp";
 }

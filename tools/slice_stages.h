@@ -91,6 +91,13 @@ BoundingBox contourExtent(const BoundingBox& box, const PrintSettings& print);
 // model's frame), .goo and .nanodlp (landscape images).
 bool landscapeOnlyFormat(const std::string& ext);
 
+// For a job without masks that names a material: "" when one of the material's settings changes what
+// is written (a material_correction the contours, material_density the resin mass of a `summary`), else
+// why the material does nothing ("none of its settings (exposure_time, ...) changes <written> or
+// <report>"; `report` empty: the job writes none).
+std::string unusedMaterialReason(const PrintSettings& print, bool summary, const std::string& written,
+                                 const std::string& report);
+
 // A job file's print_settings (`given`) naming an elephant-foot key other than the compensation while the
 // resolved settings have none: refused as doing nothing, as slice refuses the options. `where`: the
 // settings' place in the file ("settings.print_settings."). Throws InputError naming `jobFile`.
