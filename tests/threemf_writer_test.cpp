@@ -718,6 +718,36 @@ TEST(ThreeMfWriter, ProgramOutputWithFeaturesCombinesToTheReportArea) {
   }
 }
 
+// An outline correction moves the slices off the meshes' cuts: every object's mesh is then low resolution
+// (the extension's requiredextensions with it), so a consumer uses the slices, not the meshes (they were
+// "fullres": a consumer without the extension printed the uncorrected part).
+TEST(ThreeMfWriter, CorrectedOutlinesMakeTheMeshesLowResolution) {
+  ScratchDir dir;
+  writeBinaryStl(dir / "model.stl", fixtures::box(0, 0, 0, 20, 10, 5), "model", false);
+  writeBinaryStl(dir / "knob.stl", fixtures::box(2, 6, 4, 8, 12, 7), "add-on", false);
+  const char* env = std::getenv("TOPOSLICE_BIN");
+  const std::string program = env != nullptr && *env != '\0' ? env : TOPOSLICE_BIN_PATH;
+  const auto quoted = [](const fs::path& p) { return "'" + p.string() + "'"; };
+  for (const char* correction : {"--absolute-correction 0.2", "--elefant-foot-compensation 0.1", ""}) {
+    const std::string command = "'" + program + "' slice " + quoted(dir / "model.stl") + " --add " +
+                                quoted(dir / "knob.stl") + " -H 0.5 -o " + quoted(dir / "c.3mf") +
+                                " --force -q " + correction;
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    const ReadModel m = readWithLib3mf(dir / "c.3mf");
+    ASSERT_TRUE(m.ok) << std::hex << m.readError << " " << m.readMessage;
+    ASSERT_EQ(m.objects.size(), 2u);
+    const bool corrected = *correction != '\0';
+    for (const ReadObject& o : m.objects) {
+      EXPECT_EQ(o.resolution,
+                corrected ? NMR::MODELSLICESMESHRESOLUTION_LOW : NMR::MODELSLICESMESHRESOLUTION_FULL)
+          << correction << " " << o.name;
+      EXPECT_EQ(o.triangles.size(), 12u) << "the part's own mesh, not a stand-in box";
+    }
+    EXPECT_EQ(modelText(dir / "c.3mf").find("requiredextensions=\"s\"") != std::string::npos, corrected)
+        << correction;
+  }
+}
+
 TEST(ThreeMfWriter, Deterministic) {
   ScratchDir dir;
   const FacetSoup box = boxSoup(0.3f);

@@ -287,6 +287,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   contourJob.name = job.parts[members[0]].name;
   contourJob.bounds = contourExtent(extent, print);
   contourJob.layerCount = static_cast<uint32_t>(planes.size());
+  contourJob.outlinesCorrected = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
   for (std::size_t m = 0; m < members.size(); ++m) {
     const std::size_t p = members[m];
     LoadedPart& part = loaded[p];

@@ -966,6 +966,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       contours = unite(contours, boundsOf(features[i].corners));
     job.bounds = contourExtent(contours, print);
     job.layerCount = static_cast<uint32_t>(planes.size());
+    job.outlinesCorrected = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
     const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
       std::string name = path.stem().string();
       if (name.size() > 4 && name.ends_with(".stl")) name.resize(name.size() - 4);

@@ -46,6 +46,9 @@ struct ContourJob {
   // Part 1, 2, ... of every layer (part 0 is the model): add-ons first, then removals. Empty without
   // features, and then every format writes exactly what it wrote before features existed.
   std::vector<ContourPart> features;
+  // An outline correction (absolute_correction, elephant foot) moved the contours off the meshes' cuts:
+  // a mesh written beside them (3MF) is then not what the slices were cut from.
+  bool outlinesCorrected = false;
 };
 
 class ContourSink {

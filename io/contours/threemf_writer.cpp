@@ -197,7 +197,8 @@ std::string zipErrorText(int code) {
 // One part's slice stack while it is written, and what its object needs.
 struct Part {
   const FacetSoup* mesh = nullptr;  // may be null
-  bool lowres = true;               // no mesh with a proper facet: a bounding box stands in
+  bool box = true;                  // no mesh with a proper facet: a bounding box stands in
+  bool lowres = true;               // the mesh is not what the slices were cut from (a box, or corrected)
   bool reversed = false;            // a removal: loops and triangles written reversed
   Text body;                        // the current layer's <s:vertices> and <s:polygon>s
   Text pending;                     // without a layer height: the previous layer's body, waiting for its ztop
@@ -216,7 +217,10 @@ class ThreeMfWriter final : public ContourSink {
     for (std::size_t p = 0; p < parts_.size(); ++p) {
       Part& part = parts_[p];
       part.mesh = p == 0 ? mesh : featureMeshes.empty() ? nullptr : &featureMeshes[p - 1];
-      part.lowres = part.mesh == nullptr || !hasProperFacet(*part.mesh);
+      // The slices are the mesh's cuts (fullres) only when no outline correction moved them: else the
+      // mesh stands for the part at a lower resolution and a consumer must use the slices.
+      part.box = part.mesh == nullptr || !hasProperFacet(*part.mesh);
+      part.lowres = part.box || job.outlinesCorrected;
       part.reversed = p > 0 && job.features[p - 1].role == PartRole::Remove;
       lowres = lowres || part.lowres;
       if (p == 0) continue;
@@ -509,7 +513,7 @@ class ThreeMfWriter final : public ContourSink {
     out_.appendUint(sliceStackId(p));
     out_.append(part.lowres ? "\" s:meshresolution=\"lowres\">\n" : "\" s:meshresolution=\"fullres\">\n");
     out_.append("<mesh>\n<vertices>\n");
-    if (part.lowres) {
+    if (part.box) {
       // Corner i of the bounding box takes max x when bit 0 is set, max y for bit 1, max z for bit 2.
       // The box of a feature's own facets when it has any, else the model's.
       const bool ownBox = p > 0 && part.mesh != nullptr && !part.mesh->corners.empty();
