@@ -9,6 +9,7 @@
 #include "core/mesh/mesh_info.h"
 #include "core/mesh/weld.h"
 #include "core/raster/rasterize.h"
+#include "core/slicing/close_gaps.h"
 #include "core/slicing/planes.h"
 #include "io/readers/stl_reader.h"
 #include "tests/fixtures/models.h"
@@ -141,6 +142,41 @@ TEST(DefectRepair, MasksWithOnePercentOfFacetsDeletedAgreeWithIntactModel) {
               static_cast<unsigned long long>(differing), static_cast<unsigned long long>(lit),
               100 * fraction);
   EXPECT_LT(fraction, 0.005);
+}
+
+// The repair counts say which join closed each loop: a square drawn as two open halves 0.1 mm apart is
+// closed by bridges (maxGap 0.5), one whose halves are 2 mm apart only by the wider pass (it was counted
+// as "closed by bridges" with no bridge made).
+TEST(DefectRepair, GapCountsNameTheJoinsThatClosedEachLoop) {
+  const auto halves = [](double gap, double x0) {
+    LayerContours layer;
+    layer.clear(0.5);
+    for (const Point2d p : {Point2d{x0, 0}, Point2d{x0 + 10, 0}, Point2d{x0 + 10, 10 - gap}})
+      layer.addPoint(p, 0);
+    layer.endLoop(false);
+    for (const Point2d p : {Point2d{x0 + 10, 10}, Point2d{x0, 10}, Point2d{x0, gap}}) layer.addPoint(p, 1);
+    layer.endLoop(false);
+    return layer;
+  };
+  GapScratch scratch;
+  LayerContours near = halves(0.1, 0);
+  const GapStats bridged = closeGaps(near, 0.5, true, scratch);
+  EXPECT_EQ(bridged.joins, 2u);
+  EXPECT_EQ(bridged.closedLoops, 1u);
+  EXPECT_EQ(bridged.selfClosed, 0u);
+  EXPECT_EQ(bridged.closedLoopsWider, 0u);
+  LayerContours far = halves(2, 0);
+  const GapStats wider = closeGaps(far, 0.5, true, scratch);
+  EXPECT_EQ(wider.joins, 0u);
+  EXPECT_EQ(wider.closedLoops, 0u);
+  EXPECT_EQ(wider.selfClosed, 2u);
+  EXPECT_EQ(wider.closedLoopsWider, 1u);
+  ASSERT_EQ(far.loopCount(), 1u);
+  EXPECT_EQ(far.loopClosed[0], 1);
+  LayerContours open = halves(2, 0);
+  const GapStats left = closeGaps(open, 0.5, false, scratch);
+  EXPECT_EQ(left.closedLoops + left.closedLoopsWider, 0u);
+  EXPECT_EQ(left.leftOpen, 2u);
 }
 
 }  // namespace

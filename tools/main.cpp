@@ -223,11 +223,12 @@ void printSliceSummary(const std::string& model, const SliceJobOptions& options,
   // Every repair, per kind, so nothing is changed silently.
   std::printf(
       "repairs    : %llu degenerate facets skipped; %llu gaps bridged (<= %g mm) closing %llu loops, "
-      "%llu wider gaps closed, %llu polylines left open; orientation %s\n",
+      "%llu wider gaps closed closing %llu loops, %llu polylines left open; orientation %s\n",
       static_cast<unsigned long long>(r.degenerateFacets),
       static_cast<unsigned long long>(r.stats.gaps.joins), options.slice.closeGaps,
       static_cast<unsigned long long>(r.stats.gaps.closedLoops),
       static_cast<unsigned long long>(r.stats.gaps.selfClosed),
+      static_cast<unsigned long long>(r.stats.gaps.closedLoopsWider),
       static_cast<unsigned long long>(r.stats.openPolylines),
       r.flipped ? "flipped (the mesh was inside out)"
                 : (r.inverted ? "INSIDE OUT (negative volume; use --fix-orientation)" : "ok"));

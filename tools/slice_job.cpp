@@ -764,6 +764,7 @@ static void writeSliceSummary(OutputFile& file, const std::filesystem::path& mod
                   {"close_gaps_mm", options.slice.closeGaps},
                   {"loops_closed_by_bridges", r.stats.gaps.closedLoops},
                   {"wider_gaps_closed", r.stats.gaps.selfClosed},
+                  {"loops_closed_by_wider_gaps", r.stats.gaps.closedLoopsWider},
                   {"polylines_left_open", r.stats.openPolylines},
                   {"inside_out", r.inverted},
                   {"orientation_flipped", r.flipped}};

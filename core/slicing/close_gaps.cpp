@@ -50,8 +50,15 @@ GapStats closeGaps(LayerContours& layer, double maxGap, bool closeRest, GapScrat
   };
   stats.joins = match(maxGap * maxGap);
   // Then, with closeRest, the gaps wider than maxGap, nearest first: every end finds a start (there
-  // are as many free starts as free ends, its own chain's among them), so every chain closes.
-  if (closeRest) stats.selfClosed = match(std::numeric_limits<double>::infinity());
+  // are as many free starts as free ends, its own chain's among them), so every chain closes. Which
+  // polylines' joins to their successors were made here (wider than maxGap) is kept for the counts.
+  auto& wide = scratch.wide;
+  wide.assign(n, 0);
+  if (closeRest) {
+    const std::vector<int32_t> before = next;
+    stats.selfClosed = match(std::numeric_limits<double>::infinity());
+    for (uint32_t o = 0; o < n; ++o) wide[o] = before[o] < 0 && next[o] >= 0 ? 1 : 0;
+  }
   if (stats.joins == 0 && stats.selfClosed == 0) {
     stats.leftOpen = n;
     return stats;
@@ -85,11 +92,14 @@ GapStats closeGaps(LayerContours& layer, double maxGap, bool closeRest, GapScrat
   }
   for (uint32_t o = 0; o < n; ++o) {  // what is left are cycles
     if (used[o]) continue;
+    bool anyWide = false;
     for (int32_t c = static_cast<int32_t>(o); !used[static_cast<uint32_t>(c)];
-         c = next[static_cast<uint32_t>(c)])
+         c = next[static_cast<uint32_t>(c)]) {
+      anyWide = anyWide || wide[static_cast<uint32_t>(c)] != 0;
       appendPolyline(static_cast<uint32_t>(c));
+    }
     out.endLoop(true);
-    ++stats.closedLoops;
+    ++(anyWide ? stats.closedLoopsWider : stats.closedLoops);
   }
   std::swap(out, layer);
   canonicalizeLayer(layer, scratch.canonical);

@@ -18,14 +18,16 @@
 namespace toposlice {
 
 struct GapStats {
-  uint64_t joins = 0;        // gaps bridged
-  uint64_t closedLoops = 0;  // loops closed by bridging
-  uint64_t selfClosed = 0;   // joins wider than the gap limit, made to close every chain (closeRest)
-  uint64_t leftOpen = 0;     // polylines still open
+  uint64_t joins = 0;             // gaps bridged
+  uint64_t closedLoops = 0;       // loops closed by bridges alone
+  uint64_t selfClosed = 0;        // joins wider than the gap limit, made to close every chain (closeRest)
+  uint64_t closedLoopsWider = 0;  // loops whose closing took a join wider than the limit
+  uint64_t leftOpen = 0;          // polylines still open
   GapStats& operator+=(const GapStats& o) {
     joins += o.joins;
     closedLoops += o.closedLoops;
     selfClosed += o.selfClosed;
+    closedLoopsWider += o.closedLoopsWider;
     leftOpen += o.leftOpen;
     return *this;
   }
@@ -39,7 +41,7 @@ struct GapScratch {
   std::vector<uint32_t> open;  // loop index of each open polyline
   std::vector<Candidate> candidates;
   std::vector<int32_t> next, prev;
-  std::vector<uint8_t> used;
+  std::vector<uint8_t> used, wide;
   LayerContours rebuilt;
   CanonicalScratch canonical;
 };
