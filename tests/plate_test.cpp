@@ -569,6 +569,28 @@ TEST_F(PlateTest, TheBuildHeightIsMeasuredFromThePlatesBottom) {
   EXPECT_FALSE(fs::exists(dir_ / "p.cli"));
 }
 
+// A scaling that differs in x and y is applied once the part is turned, after its footprint was
+// projected: the report's footprint area is the scaled one (it was the unscaled area).
+TEST_F(PlateTest, TheReportedFootprintIsTheScaledPartsArea) {
+  writeBinaryStl(dir_ / "a.stl", fixtures::box(0, 0, 0, 10, 5, 3), "box", false);
+  const auto footprint = [&](const std::string& settings) {
+    tool_test::writeBytes(dir_ / "job.json", R"({"version": 1, "printer": "sl1", )" + settings +
+                                                 R"("settings": {"layer_height": 1, "overwrite": true},
+        "parts": [{"name": "a", "model": "a.stl", "placement": "auto"}],
+        "outputs": {"contours": ["p.cli"], "report": "r.json"}})");
+    const auto r = run({"plate", "job.json", "-q"});
+    EXPECT_EQ(r.code(), 0) << r.describe();
+    const nlohmann::json report = nlohmann::json::parse(readBytes(dir_ / "r.json"));
+    return report.at("parts").at(0).at("footprint").at("area_mm2").get<double>();
+  };
+  const double plain = footprint("");
+  EXPECT_TRUE(plain >= 50.0 && plain < 60.0) << plain;  // 10 x 5 mm, covered by the footprint's cells
+  EXPECT_NEAR(footprint(R"("print_settings": {"relative_correction_x": 1.1, "relative_correction_y": 0.9},)"),
+              plain * 1.1 * 0.9, 1e-6 * plain);
+  EXPECT_NEAR(footprint(R"("print_settings": {"relative_correction_x": 1.1, "relative_correction_y": 1.1},)"),
+              plain * 1.21, 0.02 * plain);  // scaled when read: projected anew
+}
+
 // settings.resolution, settings.pixel and settings.build_height are the plate's display and height:
 // --explain and the report's print_settings give them, naming the setting (they gave the preset's).
 TEST_F(PlateTest, TheJobsDisplaySettingsAreTheReportedOnes) {

@@ -849,7 +849,9 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
     r.bounds = box;
     r.placement = job.parts[p].placement.value_or(PlatePlacement{
         0.5 * (double{box.min.x} + box.max.x), 0.5 * (double{box.min.y} + box.max.y), a.rotation});
-    r.footprintMm2 = loaded[p].footprint.area();
+    // The footprint was projected before a scaling applied once turned: its area scales with x and y.
+    r.footprintMm2 =
+        loaded[p].footprint.area() * (scalesWhenTurned(print) ? print.scale()[0] * print.scale()[1] : 1.0);
   }
   checkPlacements(job, loaded, result.parts, geometry, arrange.spacing, grow);
 }
