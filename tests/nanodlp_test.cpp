@@ -15,6 +15,8 @@
 
 #include "io/coders/mask_png.h"
 #include "io/masks/nanodlp_writer.h"
+#include "io/readers/stl_writer.h"
+#include "tests/fixtures/shapes.h"
 #include "tests/tool_runner.h"
 
 namespace toposlice {
@@ -188,6 +190,20 @@ TEST_F(NanoDlpCli, LayersEqualThePngLayersOfTheSameJob) {
   ASSERT_EQ(run(one).code(), 0);
   EXPECT_EQ(nlohmann::json::parse(zipEntries(path("one.nanodlp")).at("profile.json"))["TransitionalLayer"],
             0);
+}
+
+// The preview shows what is printed: the model and its add-ons (it drew the model alone).
+TEST_F(NanoDlpCli, ThePreviewShowsTheAddOns) {
+  writeBinaryStl(path("tab.stl"), fixtures::box(-3, -3, 6, 3, 3, 12), "tab", false);  // on top of the part
+  const auto preview = [&](const std::string& name, bool addOn) {
+    std::vector<std::string> args{
+        "slice", tool_test::examplePart().string(), "-H", "0.5", "--printer", "sl1", "--masks", name, "-q"};
+    if (addOn) args.insert(args.end(), {"--add", "tab.stl"});
+    const tool_test::RunResult r = run(args);
+    EXPECT_EQ(r.code(), 0) << r.describe();
+    return zipEntries(path(name)).at("3d.png");
+  };
+  EXPECT_NE(preview("with.nanodlp", true), preview("without.nanodlp", false));
 }
 
 }  // namespace

@@ -936,7 +936,8 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const bool masks = !options.masks.output.empty();
   MaskJob maskJob;
   std::unique_ptr<MaskSink> maskSink;
-  MaskTransfer transfer;  // gamma and the light-uniformity map of every mask
+  MaskTransfer transfer;             // gamma and the light-uniformity map of every mask
+  std::vector<Point3f> previewSoup;  // the model and its add-ons for the printer files' pictures
   std::unique_ptr<LayerReport> report;
   std::optional<OutputFile> summaryFile;  // opened with the other outputs, written at the end
   OutputTransaction* const outputs = OutputTransaction::current();
@@ -986,8 +987,14 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       // Archive timestamps come from the model file, so the same input gives the same bytes.
       struct stat info {};
       if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
-      // The soup outlives the sink's use of it: its previews are drawn beside the bands (below).
-      maskJob.previewModel = soup.corners;
+      // The soup outlives the sink's use of it: its previews are drawn beside the bands (below). They
+      // show what is printed: the model and its add-ons (a copy of both when there are add-ons).
+      if (!options.add.empty()) {
+        previewSoup = soup.corners;
+        for (std::size_t i = 0; i < options.add.size(); ++i)
+          previewSoup.insert(previewSoup.end(), features[i].corners.begin(), features[i].corners.end());
+      }
+      maskJob.previewModel = options.add.empty() ? std::span<const Point3f>(soup.corners) : previewSoup;
       maskJob.deferPreviews = true;
       maskJob.previewRunner = parallelChunkRunner();
       maskSink = makeMaskSink(options.masks.output, maskJob, options.overwrite);
