@@ -14,7 +14,7 @@ std::optional<VariantMismatch> checkVariantConnectivityParallel(std::span<const 
       if (variantMayMismatch(corners, adjacency, begin, end)) mayFail.store(true, std::memory_order_relaxed);
     });
   }
-  if (!mayFail) return std::nullopt;
+  if (!mayFail) return checkOpenEdges(corners, adjacency);
   return checkVariantConnectivity(corners, adjacency);
 }
 

@@ -162,6 +162,39 @@ TEST(VariantCheck, NegativeZeroEqualsPositiveZero) {
   EXPECT_FALSE(checkVariantConnectivity(flipped.corners, table).has_value());
 }
 
+// An open entry (-1) claims that no single facet lies across the edge: a variant with exactly two facets
+// on it, in opposite directions, contradicts it (a table of another model with more open edges, or all
+// -1, passed before). Boundary, non-manifold and inconsistent edges of defective meshes stay open and pass.
+TEST(VariantCheck, OpenEntriesTheVariantContradictsFail) {
+  const FacetSoup pair{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, -0.0f, 0}, {0, 0, 0}, {0, -1, 0}}};
+  const std::vector<int32_t> open(6, -1);
+  for (const auto& m :
+       {checkVariantConnectivity(pair.corners, open), checkVariantConnectivityParallel(pair.corners, open)}) {
+    ASSERT_TRUE(m.has_value());
+    EXPECT_EQ(m->facet, 0u);
+    EXPECT_EQ(m->edge, 2u);
+    EXPECT_NE(m->reason.find("is open in the template's table (-1), but the variant has one facet across it"),
+              std::string::npos)
+        << m->reason;
+  }
+  // The same edge used in one direction twice (inconsistent), or by three facets (non-manifold): open.
+  const FacetSoup same{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 0}, {1, 0, 0}, {0, -1, 0}}};
+  EXPECT_EQ(adjacencyOf(same), open);
+  EXPECT_FALSE(checkVariantConnectivity(same.corners, open).has_value());
+  const FacetSoup three{
+      {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 0, 0}, {0, 0, 0}, {0, -1, 0}, {1, 0, 0}, {0, 0, 0}, {0, 0, 1}}};
+  EXPECT_EQ(adjacencyOf(three), std::vector<int32_t>(9, -1));
+  EXPECT_FALSE(checkVariantConnectivity(three.corners, std::vector<int32_t>(9, -1)).has_value());
+  for (const char* name :
+       {"defect_pig_cracks.stl", "defect_diplodocus_nonmanifold.stl", "defect_elephant_with_holes.stl"}) {
+    const FacetSoup soup = load(name);
+    const std::vector<int32_t> table = adjacencyOf(soup);
+    ASSERT_NE(std::count(table.begin(), table.end(), -1), 0) << name;
+    const auto m = checkVariantConnectivityParallel(soup.corners, table);
+    EXPECT_FALSE(m.has_value()) << name << ": " << m->reason;
+  }
+}
+
 TEST(VariantCheck, InvalidTablesAreReportedNotRead) {
   const FacetSoup pair{{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {1, 0, 0}, {0, 0, 0}, {0, -1, 0}}};
   std::vector<int32_t> table = adjacencyOf(pair);

@@ -1,8 +1,11 @@
 #include "core/mesh/variant_check.h"
 
+#include <algorithm>
+#include <array>
 #include <bit>
 #include <cassert>
 #include <cstdio>
+#include <unordered_map>
 
 #include "core/prefetch.h"
 
@@ -144,6 +147,87 @@ std::optional<VariantMismatch> firstMismatch(std::span<const Point3f> corners,
   return std::nullopt;
 }
 
+// An undirected edge by its two corner positions under the welding rule, the lower bit pattern first.
+struct EdgeKey {
+  std::array<uint32_t, 6> bits;
+  bool operator==(const EdgeKey&) const = default;
+};
+struct EdgeKeyHash {
+  std::size_t operator()(const EdgeKey& k) const {
+    uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (const uint32_t b : k.bits) h = (h ^ b) * 0x100000001B3ull;
+    return static_cast<std::size_t>(h ^ (h >> 29));
+  }
+};
+inline std::array<uint32_t, 3> weldBits(const Point3f& p) {
+  return {std::bit_cast<uint32_t>(p.x + 0.0f), std::bit_cast<uint32_t>(p.y + 0.0f),
+          std::bit_cast<uint32_t>(p.z + 0.0f)};
+}
+// The key of the edge from p to q, and whether it runs from the lower end (p) to the higher.
+inline EdgeKey edgeKey(const Point3f& p, const Point3f& q, bool& forward) {
+  const auto a = weldBits(p), b = weldBits(q);
+  forward = a < b;
+  const auto& lo = forward ? a : b;
+  const auto& hi = forward ? b : a;
+  return {{lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]}};
+}
+inline bool degenerate(const Point3f* f) {
+  return positionDifference(f[0], f[1]) == 0 || positionDifference(f[1], f[2]) == 0 ||
+         positionDifference(f[2], f[0]) == 0;
+}
+
+// The open entries (-1) of non-degenerate facets: the table claims that no single facet lies across the
+// edge (a boundary, non-manifold or inconsistent edge). The variant contradicts it where exactly two
+// non-degenerate facets use the edge, in opposite directions: its own table would pair them (a table of
+// another model with more open edges, or one whose entries are all -1, passed the pair check before).
+std::optional<VariantMismatch> firstOpenEdgeMismatch(std::span<const Point3f> corners,
+                                                     std::span<const int32_t> adjacency) {
+  const std::size_t t = adjacency.size() / 3;
+  if (std::find(adjacency.begin(), adjacency.end(), -1) == adjacency.end()) return std::nullopt;  // closed
+  struct Uses {
+    uint32_t count = 0, forward = 0;
+    uint32_t facet = 0, edge = 0;  // the first open entry with this edge
+  };
+  std::unordered_map<EdgeKey, Uses, EdgeKeyHash> open;
+  for (std::size_t i = 0; i < t; ++i) {
+    const Point3f* a = &corners[3 * i];
+    const int32_t* entries = &adjacency[3 * i];
+    if ((entries[0] != -1 && entries[1] != -1 && entries[2] != -1) || degenerate(a)) continue;
+    for (unsigned j = 0; j < 3; ++j) {
+      if (entries[j] != -1) continue;
+      bool forward = false;
+      const EdgeKey key = edgeKey(a[next(j)], a[prev(j)], forward);
+      open.try_emplace(key, Uses{0, 0, static_cast<uint32_t>(i), j});
+    }
+  }
+  if (open.empty()) return std::nullopt;
+  for (std::size_t i = 0; i < t; ++i) {
+    const Point3f* a = &corners[3 * i];
+    if (degenerate(a)) continue;
+    for (unsigned j = 0; j < 3; ++j) {
+      bool forward = false;
+      const auto it = open.find(edgeKey(a[next(j)], a[prev(j)], forward));
+      if (it == open.end()) continue;
+      ++it->second.count;
+      it->second.forward += forward ? 1 : 0;
+    }
+  }
+  std::optional<VariantMismatch> first;
+  for (const auto& [key, uses] : open) {
+    if (uses.count != 2 || uses.forward != 1) continue;
+    if (first && (first->facet < uses.facet || (first->facet == uses.facet && first->edge < uses.edge)))
+      continue;
+    VariantMismatch m;
+    m.facet = uses.facet;
+    m.edge = uses.edge;
+    m.reason = describeEdge(&corners[3 * std::size_t{uses.facet}], uses.facet, uses.edge) +
+               " is open in the template's table (-1), but the variant has one facet across it: the variant "
+               "does not share the template's connectivity (or the table is another model's)";
+    first = std::move(m);
+  }
+  return first;
+}
+
 }  // namespace
 
 std::optional<VariantMismatch> checkVariantConnectivity(std::span<const Point3f> corners,
@@ -158,8 +242,15 @@ std::optional<VariantMismatch> checkVariantConnectivity(std::span<const Point3f>
         ": the variant does not share the template's connectivity";
     return m;
   }
-  if (screen(corners, adjacency, 0, adjacency.size() / 3) == 0) return std::nullopt;
-  return firstMismatch(corners, adjacency);
+  if (screen(corners, adjacency, 0, adjacency.size() / 3) != 0)
+    if (auto m = firstMismatch(corners, adjacency)) return m;
+  return firstOpenEdgeMismatch(corners, adjacency);
+}
+
+std::optional<VariantMismatch> checkOpenEdges(std::span<const Point3f> corners,
+                                              std::span<const int32_t> adjacency) {
+  assert(corners.size() == adjacency.size());
+  return firstOpenEdgeMismatch(corners, adjacency);
 }
 
 bool variantMayMismatch(std::span<const Point3f> corners, std::span<const int32_t> adjacency,

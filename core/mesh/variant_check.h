@@ -4,7 +4,10 @@
 // its geometry: for each entry adjacency[3i+j] = k >= 0, edge j of facet i (corner j+1 -> corner j+2)
 // and the edge m of facet k whose entry names i back (adjacency[3k+m] = i) join the same two corner
 // positions in opposite directions. Positions compare bit for bit, except that -0.0 equals +0.0 (the
-// welding rule, core/mesh/weld.h). Entries of -1 are not checked: such edges are sliced as the table says.
+// welding rule, core/mesh/weld.h). An entry of -1 (no single facet across: a boundary, non-manifold or
+// inconsistent edge) holds unless exactly two non-degenerate facets of the variant use that edge, in
+// opposite directions (its own table would pair them); a table of another model, with more open edges,
+// fails there.
 // A variant with other facet order, rotated corners, a moved corner or another facet count fails, so a
 // model whose connectivity differs is detected and never sliced with a wrong table.
 #pragma once
@@ -47,6 +50,11 @@ inline void reverseFacetsOfTable(std::span<const int32_t> adjacency, std::vector
 // and readTemplateFile guarantee it), since entries (i, j) = k < i are left to facet k's side.
 std::optional<VariantMismatch> checkVariantConnectivity(std::span<const Point3f> corners,
                                                         std::span<const int32_t> adjacency);
+
+// The open-entry half of that check alone (the variant has the table's facet count): the first -1 entry
+// the variant contradicts. Linear in the facets when the table has open entries, nothing otherwise.
+std::optional<VariantMismatch> checkOpenEdges(std::span<const Point3f> corners,
+                                              std::span<const int32_t> adjacency);
 
 // The fast half of that check for facets [begin, end): false when every pair checked from those facets
 // holds, true when one may fail (or the facet counts differ); then checkVariantConnectivity finds and
