@@ -242,6 +242,17 @@ TEST(MeshReader, PlyErrorsNameTheFaceVertexOrHeaderLine) {
       "can hold");
   Bytes cut(binary.begin(), binary.end() - 20);
   EXPECT_EQ(errorOf([&] { parseMesh(cut, "c.ply"); }), "c.ply: truncated: the data ends inside face 5");
+
+  // A face count that is too small left faces unread, silently: the data after the last element is an
+  // error, ASCII or binary (the fixed-record reader leaves it to the record reader); trailing blanks are
+  // fine in ASCII.
+  EXPECT_EQ(errorOf([&] { parseMesh(replaced("element face 6", "element face 5"), "a.ply"); }),
+            "a.ply: data after the last element, line 24: the header's element counts do not cover the file");
+  EXPECT_NO_THROW(parseMesh(bytesOf(text + "\n \n"), "a.ply"));
+  Bytes longer = binary;
+  longer.insert(longer.end(), 4, std::byte{0});
+  EXPECT_EQ(errorOf([&] { parseMesh(longer, "l.ply"); }),
+            "l.ply: 4 bytes after the last element: the header's element counts do not cover the file");
 }
 
 // A runner that calls the chunks last first, as if four threads took them in any order: the fixed-record

@@ -270,6 +270,10 @@ class BinaryCursor {
     p_ += count * sizeOf(t);
   }
   std::string where() const { return ""; }
+  // "" when every byte was read, else what is left.
+  std::string leftOver() const {
+    return left() == 0 ? "" : std::to_string(left()) + " bytes after the last element";
+  }
 
  private:
   uint64_t take(Scalar t, const Item& item) {
@@ -331,6 +335,11 @@ class AsciiCursor {
     for (uint64_t i = 0; i < count; ++i) skip(t, item);
   }
   std::string where() const { return " (line " + std::to_string(line_) + ")"; }
+  // "" when only blanks are left, else where the next token is.
+  std::string leftOver() {
+    while (p_ < end_ && isBlank(*p_)) line_ += *p_++ == '\n';
+    return p_ == end_ ? "" : "data after the last element, line " + std::to_string(line_);
+  }
 
  private:
   std::string_view next(const Item& item) {
@@ -408,6 +417,9 @@ class PlyParser {
         }
       }
     }
+    // A count that is too small leaves records unread: refused rather than dropping facets silently.
+    if (const std::string rest = cursor.leftOver(); !rest.empty())
+      throwInputError(name_, rest + ": the header's element counts do not cover the file");
     if (triangles_.empty()) throwInputError(name_, "contains no facets");
     soup.corners.resize(triangles_.size());
     for (std::size_t i = 0; i < triangles_.size(); ++i) soup.corners[i] = vertices_[triangles_[i]];
@@ -530,6 +542,7 @@ class PlyParser {
       if (&e == faceElement_) faceStart = at, faceRecord = record;
       at += static_cast<std::size_t>(e.count) * record;
     }
+    if (at != data.size()) return false;  // bytes after the last element: read() names them
     const std::size_t vertices = static_cast<std::size_t>(vertexElement_->count),
                       faces = static_cast<std::size_t>(faceElement_->count);
     constexpr std::size_t kChunk = std::size_t{1} << 15;  // records

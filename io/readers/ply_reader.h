@@ -21,7 +21,9 @@
 // - Zero facets (no face element, or zero faces) -> "contains no facets".
 // - Binary: records packed without padding, in the stated byte order. Data ending inside a record ->
 //   "truncated: ...". ASCII: values are whitespace-separated tokens (line breaks anywhere); errors give
-//   the 1-based line. Bytes after the last element are ignored.
+//   the 1-based line. Data after the last element (a record count that is too small) is an error:
+//   "N bytes after the last element" (binary), "data after the last element, line L" (ASCII; blanks
+//   are allowed there).
 // - Hostile counts: no allocation is sized from a count before the count is checked against the bytes
 //   left (each record needs at least its fixed bytes in binary, one token per property in ASCII).
 #pragma once
