@@ -1,12 +1,11 @@
 #include "core/mesh/variant_check.h"
 
 #include <algorithm>
-#include <array>
-#include <bit>
 #include <cassert>
 #include <cstdio>
 #include <unordered_map>
 
+#include "core/mesh/weld.h"
 #include "core/prefetch.h"
 
 namespace toposlice {
@@ -68,9 +67,8 @@ enum class Problem { OutOfRange, Self, NoBackEntry, Geometry };
 
 // Bits that differ between two positions under the welding rule; 0 when they are the same corner.
 inline uint32_t positionDifference(const Point3f& p, const Point3f& q) {
-  return (std::bit_cast<uint32_t>(p.x + 0.0f) ^ std::bit_cast<uint32_t>(q.x + 0.0f)) |
-         (std::bit_cast<uint32_t>(p.y + 0.0f) ^ std::bit_cast<uint32_t>(q.y + 0.0f)) |
-         (std::bit_cast<uint32_t>(p.z + 0.0f) ^ std::bit_cast<uint32_t>(q.z + 0.0f));
+  const WeldKey a = weldKey(p), b = weldKey(q);
+  return (a.x ^ b.x) | (a.y ^ b.y) | (a.z ^ b.z);
 }
 
 // How many facets ahead the screening pass prefetches its neighbours' rows: enough to hide a cache
@@ -147,29 +145,23 @@ std::optional<VariantMismatch> firstMismatch(std::span<const Point3f> corners,
   return std::nullopt;
 }
 
-// An undirected edge by its two corner positions under the welding rule, the lower bit pattern first.
+// An undirected edge by its two corners' weld keys, the lower first.
 struct EdgeKey {
-  std::array<uint32_t, 6> bits;
+  WeldKey lo, hi;
   bool operator==(const EdgeKey&) const = default;
 };
 struct EdgeKeyHash {
   std::size_t operator()(const EdgeKey& k) const {
     uint64_t h = 0x9E3779B97F4A7C15ull;
-    for (const uint32_t b : k.bits) h = (h ^ b) * 0x100000001B3ull;
+    for (const uint32_t b : {k.lo.x, k.lo.y, k.lo.z, k.hi.x, k.hi.y, k.hi.z}) h = (h ^ b) * 0x100000001B3ull;
     return static_cast<std::size_t>(h ^ (h >> 29));
   }
 };
-inline std::array<uint32_t, 3> weldBits(const Point3f& p) {
-  return {std::bit_cast<uint32_t>(p.x + 0.0f), std::bit_cast<uint32_t>(p.y + 0.0f),
-          std::bit_cast<uint32_t>(p.z + 0.0f)};
-}
 // The key of the edge from p to q, and whether it runs from the lower end (p) to the higher.
 inline EdgeKey edgeKey(const Point3f& p, const Point3f& q, bool& forward) {
-  const auto a = weldBits(p), b = weldBits(q);
+  const WeldKey a = weldKey(p), b = weldKey(q);
   forward = a < b;
-  const auto& lo = forward ? a : b;
-  const auto& hi = forward ? b : a;
-  return {{lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]}};
+  return forward ? EdgeKey{a, b} : EdgeKey{b, a};
 }
 inline bool degenerate(const Point3f* f) {
   return positionDifference(f[0], f[1]) == 0 || positionDifference(f[1], f[2]) == 0 ||

@@ -1,7 +1,6 @@
 #include "core/mesh/weld.h"
 
 #include <algorithm>
-#include <bit>
 #include <cstring>
 #include <memory>
 #include <utility>
@@ -11,15 +10,7 @@
 namespace toposlice {
 namespace {
 
-struct CornerKey {
-  uint32_t x, y, z;
-};
-
-// -0.0f + 0.0f is +0.0f, so both zeros hash and compare alike.
-inline CornerKey keyOf(const Point3f& p) {
-  return {std::bit_cast<uint32_t>(p.x + 0.0f), std::bit_cast<uint32_t>(p.y + 0.0f),
-          std::bit_cast<uint32_t>(p.z + 0.0f)};
-}
+using CornerKey = WeldKey;  // both zeros hash and compare alike
 
 inline uint64_t hashKey(const CornerKey& k) {
   uint64_t h = (uint64_t{k.x} << 32 | k.y) * 0x9E3779B97F4A7C15ull;
@@ -51,7 +42,7 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
   runner.run(chunks, 1, [&](std::size_t c0, std::size_t c1) {
     for (std::size_t c = c0; c < c1; ++c)
       for (std::size_t i = c * kChunk; i < chunkEnd(c); ++i) {
-        const auto p = static_cast<uint8_t>(((hashKey(keyOf(corners[i])) >> 32) * parts) >> 32);
+        const auto p = static_cast<uint8_t>(((hashKey(weldKey(corners[i])) >> 32) * parts) >> 32);
         part[i] = p;
         ++partSize[c * parts + p];
       }
@@ -85,7 +76,7 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
       const uint32_t* const own = members.get() + partBegin[p];
       for (std::size_t m = 0; m < count; ++m) {
         const std::size_t i = own[m];
-        const CornerKey key = keyOf(corners[i]);
+        const CornerKey key = weldKey(corners[i]);
         for (uint64_t slot = hashKey(key) & mask;; slot = (slot + 1) & mask) {
           const uint32_t k = table[slot];
           if (k == kEmpty) {
@@ -96,7 +87,7 @@ IndexedMesh weldSplit(std::span<const Point3f> corners, const ChunkRunner& runne
             break;
           }
           const CornerKey& other = seen[k].first;
-          if (other.x == key.x && other.y == key.y && other.z == key.z) {
+          if (other == key) {
             first[i] = seen[k].second;
             break;
           }
@@ -152,8 +143,7 @@ void IncrementalWeld::add(std::span<const Point3f> corners) {
     mask_ = capacity - 1;
     table_.assign(capacity, kEmpty);
     for (std::size_t v = 0; v < keys_.size(); ++v) {
-      const CornerKey key{keys_[v].x, keys_[v].y, keys_[v].z};
-      uint64_t slot = hashKey(key) & mask_;
+      uint64_t slot = hashKey(keys_[v]) & mask_;
       while (table_[slot] != kEmpty) slot = (slot + 1) & mask_;
       table_[slot] = static_cast<uint32_t>(v);
     }
@@ -162,20 +152,19 @@ void IncrementalWeld::add(std::span<const Point3f> corners) {
   mesh_.facetVertices.resize(at + corners.size());
   uint32_t* const out = mesh_.facetVertices.data() + at;
   for (std::size_t c = 0; c < corners.size(); ++c) {
-    const CornerKey key = keyOf(corners[c]);
+    const CornerKey key = weldKey(corners[c]);
     uint64_t slot = hashKey(key) & mask_;
     for (;;) {
       const uint32_t v = table_[slot];
       if (v == kEmpty) {
         const auto index = static_cast<uint32_t>(keys_.size());
         table_[slot] = index;
-        keys_.push_back({key.x, key.y, key.z});
+        keys_.push_back(key);
         mesh_.vertices.push_back(corners[c]);
         out[c] = index;
         break;
       }
-      const Key& k = keys_[v];
-      if (k.x == key.x && k.y == key.y && k.z == key.z) {
+      if (keys_[v] == key) {
         out[c] = v;
         break;
       }

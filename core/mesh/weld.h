@@ -7,6 +7,8 @@
 // result is the same, bit for bit, for any runner and thread count.
 #pragma once
 
+#include <bit>
+#include <compare>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -15,6 +17,17 @@
 #include "core/mesh/mesh.h"
 
 namespace toposlice {
+
+// A corner's coordinate bits under the welding rule: -0.0f + 0.0f is +0.0f, so both zeros give one key.
+// Equal keys are one vertex.
+struct WeldKey {
+  uint32_t x, y, z;
+  auto operator<=>(const WeldKey&) const = default;
+};
+inline WeldKey weldKey(const Point3f& p) {
+  return {std::bit_cast<uint32_t>(p.x + 0.0f), std::bit_cast<uint32_t>(p.y + 0.0f),
+          std::bit_cast<uint32_t>(p.z + 0.0f)};
+}
 
 IndexedMesh weldCorners(std::span<const Point3f> corners, const ChunkRunner& runner = serialChunkRunner());
 
@@ -27,9 +40,7 @@ class IncrementalWeld {
   IndexedMesh take() { return std::move(mesh_); }
 
  private:
-  struct Key {
-    uint32_t x, y, z;
-  };
+  using Key = WeldKey;
   IndexedMesh mesh_;
   std::vector<uint32_t> table_;  // per slot a vertex number, or empty
   std::vector<Key> keys_;        // per vertex its coordinate bits
