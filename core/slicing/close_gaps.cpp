@@ -24,8 +24,11 @@ GapStats closeGaps(LayerContours& layer, double maxGap, bool closeRest, GapScrat
   next.assign(n, -1);
   prev.assign(n, -1);
   // Greedy nearest-first matching of free ends (no successor yet) to free starts (no predecessor yet),
-  // over the pairs at most sqrt(max2) apart; ties by polyline order. Returns the joins made.
-  auto match = [&](double max2) {
+  // over the pairs at most sqrt(max2) apart; ties by polyline order. Returns the joins made; `wider`
+  // marks them (wide[from]) as joins wider than maxGap, for the counts.
+  auto& wide = scratch.wide;
+  wide.assign(n, 0);
+  auto match = [&](double max2, bool wider) {
     candidates.clear();
     for (uint32_t i = 0; i < n; ++i) {
       if (next[i] >= 0) continue;
@@ -44,21 +47,15 @@ GapStats closeGaps(LayerContours& layer, double maxGap, bool closeRest, GapScrat
       if (next[c.from] >= 0 || prev[c.to] >= 0) continue;
       next[c.from] = static_cast<int32_t>(c.to);
       prev[c.to] = static_cast<int32_t>(c.from);
+      wide[c.from] = wider ? 1 : 0;
       ++joins;
     }
     return joins;
   };
-  stats.joins = match(maxGap * maxGap);
+  stats.joins = match(maxGap * maxGap, false);
   // Then, with closeRest, the gaps wider than maxGap, nearest first: every end finds a start (there
-  // are as many free starts as free ends, its own chain's among them), so every chain closes. Which
-  // polylines' joins to their successors were made here (wider than maxGap) is kept for the counts.
-  auto& wide = scratch.wide;
-  wide.assign(n, 0);
-  if (closeRest) {
-    const std::vector<int32_t> before = next;
-    stats.selfClosed = match(std::numeric_limits<double>::infinity());
-    for (uint32_t o = 0; o < n; ++o) wide[o] = before[o] < 0 && next[o] >= 0 ? 1 : 0;
-  }
+  // are as many free starts as free ends, its own chain's among them), so every chain closes.
+  if (closeRest) stats.selfClosed = match(std::numeric_limits<double>::infinity(), true);
   if (stats.joins == 0 && stats.selfClosed == 0) {
     stats.leftOpen = n;
     return stats;
