@@ -21,8 +21,7 @@ namespace toposlice {
 BatchTemplate loadOrBuildBatchTemplate(const BatchJob& job, const std::filesystem::path& jobPath, bool save) {
   // The printer, material and profile first: a typo there fails at once, before a table is built and
   // saved and every variant then fails on it.
-  batchJobSettings(job);
-  checkBatchMaskImages(job);
+  checkBatchMaskImages(job, batchJobSettings(job));
   checkBatchFeatureFiles(job);
   BatchTemplate t;
   const auto readTemplateModel = [&job] {
@@ -197,11 +196,11 @@ MaskOptions batchMaskOptions(const BatchJob& job, const std::filesystem::path& m
   return o;
 }
 
-void checkBatchMaskImages(const BatchJob& job) {
+void checkBatchMaskImages(const BatchJob& job, const PrintSettings& settings) {
   std::set<std::string> formats;
   for (const BatchVariant& v : job.variants) {
     if (v.masks.empty() || !formats.insert(lowerExtension(v.masks)).second) continue;
-    PrintSettings print = batchJobSettings(job);
+    PrintSettings print = settings;
     MaskOptions o = batchMaskOptions(job, v.masks, print);
     o.crop = true;  // no model: its extent only places the image
     print = settingsForMaskFormat(print, v.masks);

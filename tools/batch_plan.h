@@ -50,8 +50,9 @@ MaskOptions batchMaskOptions(const BatchJob& job, const std::filesystem::path& m
 
 // The image's own checks of every mask format the variants write, as a variant's run makes them, without a
 // model (a size and a pixel pitch, an orientation the format carries, the light map against the display),
-// once per format, before any variant. Throws InputError naming the job and the first such variant.
-void checkBatchMaskImages(const BatchJob& job);
+// once per format, before any variant. `settings`: batchJobSettings(job). Throws InputError naming the
+// job and the first such variant.
+void checkBatchMaskImages(const BatchJob& job, const PrintSettings& settings);
 
 // Every variant's feature files, before any variant: one given twice, both added and removed, or the
 // variant's model given as its own feature (slice's checkFeatureFiles). Throws InputError naming the job

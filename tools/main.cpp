@@ -354,11 +354,12 @@ int explainBatchSettings(const std::filesystem::path& jobPath) {
   const std::string masks = withMasks == 0 ? std::string()
                                            : "each variant's (" + std::to_string(withMasks) + " of " +
                                                  std::to_string(job.variants.size()) + " variants)";
-  PrintSettings print = batchJobSettings(job);
+  const PrintSettings settings = batchJobSettings(job);
+  PrintSettings print = settings;
   batchMaskOptions(job, {}, print);  // settings.resolution and settings.pixel, as the display's settings
   for (const BatchVariant& v : job.variants)
     checkMaskSettings(print, job.antialias, !v.masks.empty(), "antialias");
-  checkBatchMaskImages(job);  // the light map too, as the run does before any variant
+  checkBatchMaskImages(job, settings);  // the light map too, as the run does before any variant
   checkBatchFeatureFiles(job);
   explainPrintSettings(print, masks, job.antialias,
                        "each variant's bounding-box centre in x and y and its lowest z");
@@ -780,9 +781,8 @@ int run(int argc, char** argv) {
     recordDisplayOptions(options.print, options.masks);
     options.print = settingsForMaskFormat(options.print, options.masks.output);
     const PrintSettings& print = options.print;
-    needs(slice->count("--printer") > 0,
-          masks || print.scales() || print.absoluteCorrection != 0 || print.elefantFootCompensation > 0,
-          "--printer", "mask output (--masks), or a printer whose corrections change the contours");
+    needs(slice->count("--printer") > 0, masks || print.scales() || print.correctsOutlines(), "--printer",
+          "mask output (--masks), or a printer whose corrections change the contours");
     // Settings given here that only the masks use do nothing without them.
     const std::vector<std::filesystem::path> maskOutputs =
         masks ? std::vector<std::filesystem::path>{options.masks.output}

@@ -113,9 +113,7 @@ void checkPlateOutputs(const PlateJob& job, uint32_t first, uint32_t end,
 }
 
 BoundingBox partBounds(const LoadedPart& part, std::size_t addCount) {
-  BoundingBox box = boundsOf(part.model.corners);
-  for (std::size_t i = 0; i < addCount; ++i) box = unite(box, boundsOf(part.features[i].corners));
-  return box;
+  return unite(boundsOf(part.model.corners), std::span<const FacetSoup>(part.features).first(addCount));
 }
 
 struct PlateGeometry {
@@ -287,7 +285,7 @@ PlateSlice slicePlate(const PlateJob& job, uint32_t plate, const std::vector<std
   contourJob.name = job.parts[members[0]].name;
   contourJob.bounds = contourExtent(extent, print);
   contourJob.layerCount = static_cast<uint32_t>(planes.size());
-  contourJob.outlinesCorrected = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+  contourJob.outlinesCorrected = print.correctsOutlines();
   for (std::size_t m = 0; m < members.size(); ++m) {
     const std::size_t p = members[m];
     LoadedPart& part = loaded[p];
@@ -662,12 +660,19 @@ PrintSettings plateJobSettings(const PlateJob& job) {
   return print;
 }
 
-void checkPlateMaskSettings(const PlateJob& job) {
+// The masks' own checks with the job's resolved settings and display, as slicePlate makes them.
+static void checkPlateMasks(const PlateJob& job, const PrintSettings& print, const PlateGeometry& geometry) {
   if (job.masks.empty()) return;
-  const PrintSettings print = givenPlateSettings(job);
-  MaskOptions o = plateMaskOptions(job, print, plateGeometry(job, print), plateOutputPath(job.masks, 0));
+  MaskOptions o = plateMaskOptions(job, print, geometry, plateOutputPath(job.masks, 0));
   o.crop = true;  // no parts: the image's own checks only
   maskTransfer(print, makeMaskJob(o, print, BoundingBox{}, "plate", {}));
+}
+
+void checkPlateMaskSettings(const PlateJob& job) {
+  PrintSettings print = givenPlateSettings(job);
+  const PlateGeometry geometry = plateGeometry(job, print);
+  recordPlateSettings(print, job);
+  checkPlateMasks(job, print, geometry);
 }
 
 PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl>()) {
@@ -685,7 +690,7 @@ PreparedPlateJob::PreparedPlateJob(PlateJob given) : impl_(std::make_unique<Impl
                      " mm is more than the plate's diagonal (" + formatNumber(diagonal) +
                      " mm): no two parts could share a plate");
   checkMaskSettings(print, job.antialias, !job.masks.empty(), "settings.antialias");
-  checkPlateMaskSettings(job);  // the light map against the display, before any part is read
+  checkPlateMasks(job, print, geometry);  // the light map against the display, before any part is read
   PlateResult& result = impl_->result;
   const std::size_t count = job.parts.size();
   std::vector<std::filesystem::path> inputs{job.sourceFile, job.profile, print.lightMap};

@@ -51,9 +51,9 @@ struct PlateResult {
 // print_settings. Throws InputError for an unknown name, a bad file, key or value.
 PrintSettings plateJobSettings(const PlateJob& job);
 
-// Before any part is read, and for --explain: the plate's masks' own checks as a run makes them, without the
-// parts (a size and a pixel pitch, an orientation the format carries, the light map against the display).
-// Throws InputError.
+// For --explain (a run makes them before any part is read): the plate's masks' own checks as a run makes
+// them, without the parts (a size and a pixel pitch, an orientation the format carries, the light map against
+// the display). Throws InputError.
 void checkPlateMaskSettings(const PlateJob& job);
 
 // Runs the job. Everything that can be refused is refused before any slicing: unknown printer,

@@ -5,7 +5,6 @@
 #include <sys/stat.h>
 
 #include <algorithm>
-#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -303,12 +302,9 @@ MaskJob makeMaskJob(const MaskOptions& o, const PrintSettings& print, const Boun
   // need, not a name of the printer; the preset's own name is.
   if (ext == ".goo" && setByPrinter(print, "printer_model")) {
     const std::optional<PrinterPreset> preset = findPrinter(print.printerName);
+    const std::optional<PrinterPreset> named = findPrinter(print.printerModel);  // SL1, SL1S: their own
     if (preset && print.printerModel == preset->model &&
-        !std::equal(print.printerModel.begin(), print.printerModel.end(), print.printerName.begin(),
-                    print.printerName.end(), [](char a, char b) {
-                      return std::tolower(static_cast<unsigned char>(a)) ==
-                             std::tolower(static_cast<unsigned char>(b));
-                    }))
+        !(named && named->name == std::string_view(preset->name)))
       job.printerModel = preset->name;
   }
   if (ext == ".goo" && print.printerModel.size() > 31)  // it was cut off there without a word
@@ -707,13 +703,12 @@ static void checkPlanesCutModel(const std::filesystem::path& model, const std::v
   if (planes.empty())
     throw InputError(model.string() + ": the planes give no layer to slice (layer height " +
                      formatNumber(options.planes.layerHeight.value_or(0)) + " mm)");
-  const auto zmin = static_cast<float>(result.zBottom),
-             zmax = static_cast<float>(result.zTop);  // mesh floats
+  const float zmin = result.printed.min.z, zmax = result.printed.max.z;  // mesh coordinates, printed as such
   std::size_t outside = 0;
   // A vertex on a plane counts as above it (DESIGN.md): a plane at the bottom cuts nothing, one at the
   // top cuts the facets that rise to it (the top face's outline).
   for (const double z : planes) outside += z <= zmin || z > zmax ? 1 : 0;
-  const bool addOnsBeyond = result.zBottom < result.bounds.min.z || result.zTop > result.bounds.max.z;
+  const bool addOnsBeyond = zmin < result.bounds.min.z || zmax > result.bounds.max.z;
   const auto planeText = [](double z) { return readableNumber(std::round(z * 1e6) / 1e6); };  // 73.425
   char span[200];
   std::snprintf(span, sizeof span, "planes at z %s .. %s mm, the model%s spans z %s .. %s mm",
@@ -751,7 +746,7 @@ static void writeSliceSummary(OutputFile& file, const std::filesystem::path& mod
   j["layers"] = {{"count", r.stats.layers},
                  {"first_z_mm", planes.front()},
                  {"last_z_mm", planes.back()},
-                 {"layer_height_mm", nominalLayerHeight(options.planes, planes, r.zBottom)}};
+                 {"layer_height_mm", nominalLayerHeight(options.planes, planes, r.printed.min.z)}};
   j["contours"] = {
       {"segments", r.stats.segments}, {"loops", r.stats.loops}, {"open_polylines", r.stats.openPolylines}};
   // Counted only where the adjacency was built: null (not 0) after a template's table or for cp / sr-lazy.
@@ -879,17 +874,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (FacetSoup& f : features) scaleAll(f.corners);
     measures = measureSoup(soup.corners);
   }
-  result.zBottom = measures.bounds.min.z;
-  result.zTop = measures.bounds.max.z;
-  for (std::size_t i = 0; i < options.add.size(); ++i) {
-    const BoundingBox b = boundsOf(features[i].corners);
-    result.zBottom = std::min<double>(result.zBottom, b.min.z);
-    result.zTop = std::max<double>(result.zTop, b.max.z);
-  }
-  const bool addOnsBeyond = result.zBottom < measures.bounds.min.z || result.zTop > measures.bounds.max.z;
-  if (print.maxPrintHeight > 0 && result.zTop - result.zBottom > print.maxPrintHeight)
+  const std::span<const FacetSoup> addOns = std::span<const FacetSoup>(features).first(options.add.size());
+  result.printed = unite(measures.bounds, addOns);
+  const BoundingBox& printed = result.printed;
+  const bool addOnsBeyond = printed.min.z < measures.bounds.min.z || printed.max.z > measures.bounds.max.z;
+  if (print.maxPrintHeight > 0 && double{printed.max.z} - printed.min.z > print.maxPrintHeight)
     throw InputError(model.string() + ": the model" + (addOnsBeyond ? " with its add-ons" : "") + " is " +
-                     formatNumber(static_cast<float>(result.zTop - result.zBottom)) +  // a float: "6.2"
+                     formatNumber(printed.max.z - printed.min.z) +  // a float: "6.2"
                      " mm tall, more than the printer's max_print_height " +
                      formatNumber(print.maxPrintHeight) + " mm" +
                      (print.scales() ? " (after the scaling correction)" : ""));
@@ -944,7 +935,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
   const auto setUpOutputs = [&] {
     const OutputTransaction::Adopt use(outputs);  // this may run on another thread
     std::string error;
-    planes = makePlanes(options.planes, result.zBottom, result.zTop, error);
+    planes = makePlanes(options.planes, result.printed.min.z, result.printed.max.z, error);
     if (!error.empty()) throw InputError(model.string() + ": " + error);
     checkPlanesCutModel(model, planes, result, options, result.warnings);
     if (masks && planes.size() == 1 && !options.planes.explicitZ.empty())
@@ -958,17 +949,13 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     for (const char* ext : {".stl", ".ply", ".obj", ".3mf", ".STL", ".PLY", ".OBJ", ".3MF"})
       if (job.name.size() > 4 && job.name.ends_with(ext)) job.name.resize(job.name.size() - 4);
     // What is printed: the model and its add-ons (the masks' image is placed on it).
-    BoundingBox extent = result.bounds;
-    for (std::size_t i = 0; i < options.add.size(); ++i)
-      extent = unite(extent, boundsOf(features[i].corners));
+    const BoundingBox& extent = result.printed;
     // The contours' extent (a CLI's $$DIMENSION, an SVG's view box): every part's contours, the
     // removals' too, grown by a growing absolute_correction, so that it holds every corrected contour.
-    BoundingBox contours = extent;
-    for (std::size_t i = options.add.size(); i < features.size(); ++i)
-      contours = unite(contours, boundsOf(features[i].corners));
-    job.bounds = contourExtent(contours, print);
+    job.bounds =
+        contourExtent(unite(extent, std::span<const FacetSoup>(features).subspan(options.add.size())), print);
     job.layerCount = static_cast<uint32_t>(planes.size());
-    job.outlinesCorrected = print.absoluteCorrection != 0 || print.elefantFootCompensation > 0;
+    job.outlinesCorrected = print.correctsOutlines();
     const auto partName = [](const std::filesystem::path& path) {  // "a.stl.gz" -> "a", as for the model
       std::string name = path.stem().string();
       if (name.size() > 4 && name.ends_with(".stl")) name.resize(name.size() - 4);
@@ -983,7 +970,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
     // Masks: grid and sink (per-slot rasterizer state below).
     if (masks) {
       maskJob = makeMaskJob(options.masks, print, extent, job.name, planes);
-      maskJob.layerHeight = nominalLayerHeight(options.planes, planes, result.zBottom);
+      maskJob.layerHeight = nominalLayerHeight(options.planes, planes, result.printed.min.z);
       // Archive timestamps come from the model file, so the same input gives the same bytes.
       struct stat info {};
       if (::stat(model.c_str(), &info) == 0) maskJob.created = info.st_mtim.tv_sec;
@@ -1149,7 +1136,7 @@ SliceJobResult runSliceJob(const std::filesystem::path& model, const SliceJobOpt
       }
     }
     if (report) report->addLayer(k, planes[k], r.area, layer[0].loopCount(), r.islands);
-    volumeMm3 += r.area * layerThickness(planes, k, options.planes, result.zBottom);
+    volumeMm3 += r.area * layerThickness(planes, k, options.planes, result.printed.min.z);
     litArea += r.area;
   };
 

@@ -70,9 +70,10 @@ struct SliceJobResult {
   MeshSource source;  // the model file's format
   uint64_t facets = 0;
   BoundingBox bounds;
-  // The z range that is printed: the model's and its add-ons' (a base or a label reaching beyond the
-  // model is part of the print). The default planes cover it, and the build height is measured on it.
-  double zBottom = 0, zTop = 0;
+  // What is printed: the model's box and its add-ons' (a base or a label reaching beyond the model is
+  // part of the print). The default planes cover its z range, the build height is measured on it, and
+  // the masks' image is placed on it.
+  BoundingBox printed;
   std::string topology;           // how the adjacency was obtained, for the summary
   EdgeStats edges;                // when built here
   bool edgesCounted = false;      // the adjacency was built here, so `edges` counts the model's defects

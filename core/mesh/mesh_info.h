@@ -28,6 +28,12 @@ inline BoundingBox unite(const BoundingBox& a, const BoundingBox& b) {
           {std::max(a.max.x, b.max.x), std::max(a.max.y, b.max.y), std::max(a.max.z, b.max.z)}};
 }
 
+// `box` grown to hold every corner of `soups` (a model's box and its add-ons, say).
+inline BoundingBox unite(BoundingBox box, std::span<const FacetSoup> soups) {
+  for (const FacetSoup& soup : soups) box = unite(box, boundsOf(soup.corners));
+  return box;
+}
+
 // Signed volume of the soup (divergence theorem, tetrahedra against the bounding-box centre), in double.
 double signedVolume(std::span<const Point3f> corners);
 

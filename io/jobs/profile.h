@@ -71,6 +71,8 @@ struct PrintSettings {
     const auto s = scale();
     return s[0] != 1 || s[1] != 1 || s[2] != 1;
   }
+  // An outline correction (absolute_correction, an elephant foot) moves the contours off the mesh's cuts.
+  bool correctsOutlines() const { return absoluteCorrection != 0 || elefantFootCompensation > 0; }
   bool set(std::string_view key) const { return origin.count(std::string(key)) > 0; }
 };
 
